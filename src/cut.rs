@@ -1,0 +1,652 @@
+//! Choosing the cut: the paper's error list, thresholds, results, and the
+//! exact reference sum.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use glam::{DVec3, Vec3};
+
+use crate::geometry::{Cone, Surface};
+use crate::shader::{NodeBound, Shader, ViewIndependent};
+use crate::tree::{LightTree, Node};
+use crate::visibility::{Coverage, NodeBounds, Unoccluded, Visibility};
+use crate::{ROUNDING_ALLOWANCE, ShadeError};
+
+/// What the summed error bound is compared with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Target {
+    /// Stop when every channel's summed error bound is at most this many
+    /// radiance units (the paper's `T_diffuse`; it used 1% of the display
+    /// range).
+    Absolute(f64),
+    /// Stop when the largest channel's summed error bound is at most this
+    /// fraction of the largest channel of the estimate (Lightcuts' 2% Weber
+    /// threshold, here applied to the certified bound). Since the exact value
+    /// is at least `estimate - bound`, a met relative threshold `t < 1`
+    /// certifies a relative error of at most `t / (1 - t)` in the largest
+    /// channel.
+    Relative(f64),
+}
+
+/// When the cut stops refining.
+///
+/// Three conditions combine: the error [`Target`] (the paper's error list:
+/// refine the node of greatest error while the sum of node errors exceeds
+/// the target), an optional *maximal contribution* (the paper's specular
+/// criterion: also refine every node whose upper bound exceeds it), and an
+/// optional budget that caps the work regardless.
+///
+/// Thresholds must be non-negative; infinity is allowed (an infinite target
+/// evaluates the root only, unless the root's ball contains the shading
+/// point). NaN or negative values make the shading call return
+/// [`ShadeError::InvalidThreshold`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Threshold {
+    target: Target,
+    max_contribution: Option<f64>,
+    budget: Option<u32>,
+}
+
+impl Threshold {
+    /// Absolute threshold on the summed error bound, in radiance units.
+    pub const fn absolute(t: f64) -> Self {
+        Self {
+            target: Target::Absolute(t),
+            max_contribution: None,
+            budget: None,
+        }
+    }
+
+    /// Threshold on the summed error bound relative to the estimate.
+    pub const fn relative(t: f64) -> Self {
+        Self {
+            target: Target::Relative(t),
+            max_contribution: None,
+            budget: None,
+        }
+    }
+
+    /// Threshold 0: refine until every remaining node has zero error (the
+    /// exact sum, up to rounding).
+    pub const fn exact() -> Self {
+        Self::absolute(0.0)
+    }
+
+    /// Caps the work: at most `max_cost` evaluations, counting each node
+    /// bound and each exact light evaluation as one. The root is always
+    /// evaluated, so budgets 0 and 1 both evaluate the root only. A node is
+    /// refined only if all of its children (or lights) fit in what remains.
+    pub const fn with_budget(mut self, max_cost: u32) -> Self {
+        self.budget = Some(max_cost);
+        self
+    }
+
+    /// The paper's specular criterion: additionally refine every node whose
+    /// maximal possible contribution (the upper bound of its largest channel)
+    /// exceeds `t`.
+    ///
+    /// Choose it for glossy highlights: a narrow lobe gives a few nodes a
+    /// large upper bound and a tiny estimate, and the error list alone may
+    /// stop before it finds the few lights inside the lobe when the rest of
+    /// the scene's error is small. Combine it with [`Threshold::absolute`]
+    /// `(f64::INFINITY)` for the paper's specular algorithm on its own.
+    pub const fn with_max_contribution(mut self, t: f64) -> Self {
+        self.max_contribution = Some(t);
+        self
+    }
+
+    /// The error target.
+    pub const fn target(&self) -> Target {
+        self.target
+    }
+
+    /// The maximal-contribution (specular) threshold, if any.
+    pub const fn max_contribution(&self) -> Option<f64> {
+        self.max_contribution
+    }
+
+    /// The budget, if any.
+    pub const fn budget(&self) -> Option<u32> {
+        self.budget
+    }
+
+    fn check(&self) -> Result<(), ShadeError> {
+        let t = match self.target {
+            Target::Absolute(t) | Target::Relative(t) => t,
+        };
+        // `!(t >= 0)` is also true for NaN.
+        if !(t >= 0.0) {
+            return Err(ShadeError::InvalidThreshold(t));
+        }
+        if let Some(m) = self.max_contribution {
+            if !(m >= 0.0) {
+                return Err(ShadeError::InvalidThreshold(m));
+            }
+        }
+        Ok(())
+    }
+
+    #[inline]
+    fn met(&self, estimate: DVec3, error: DVec3) -> bool {
+        let err = error.max_element();
+        match self.target {
+            Target::Absolute(t) => err <= t,
+            Target::Relative(t) => err <= t * estimate.max_element(),
+        }
+    }
+}
+
+/// Why the cut stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Stop {
+    /// The threshold was met: [`ShadeResult::error_bound`] satisfies it.
+    ThresholdMet,
+    /// The budget ran out first; the bound is still certified but may exceed
+    /// the threshold (and is infinite if a node containing the shading point
+    /// was left unrefined).
+    Budget,
+}
+
+/// Radiance at a shading point with its certified error bound and its cost.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadeResult {
+    /// Estimated RGB radiance.
+    pub radiance: DVec3,
+    /// Certified bound on `|radiance - exact|` per channel, up to
+    /// [`ROUNDING_ALLOWANCE`] of the exact value (see the crate docs).
+    pub error_bound: DVec3,
+    /// Node bounds computed.
+    pub nodes_evaluated: u32,
+    /// Single lights evaluated exactly.
+    pub lights_evaluated: u32,
+    /// Visibility classifications asked of the host.
+    pub classify_queries: u32,
+    /// Point-to-point visibility queries asked of the host (a standard ray
+    /// tracer asks one per light).
+    pub point_queries: u32,
+    /// Why the cut stopped.
+    pub stop: Stop,
+}
+
+impl ShadeResult {
+    /// `nodes_evaluated + lights_evaluated`: the work, in the units of
+    /// [`Threshold::with_budget`].
+    pub fn cost(&self) -> u32 {
+        self.nodes_evaluated + self.lights_evaluated
+    }
+}
+
+/// Priority classes of the error list, refined in this order.
+const CLASS_ERROR: u8 = 0;
+/// Above the maximal-contribution threshold.
+const CLASS_OVER_CONTRIBUTION: u8 = 1;
+/// No finite bound: the node's ball reaches the shading point.
+const CLASS_UNBOUNDED: u8 = 2;
+
+/// An unrefined node of the cut.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    class: u8,
+    /// Largest channel of the error bound: the error list's key.
+    key: f64,
+    node: u32,
+    /// The node is known to be fully visible (no visibility query needed
+    /// below it).
+    visible: bool,
+    estimate: DVec3,
+    error: DVec3,
+}
+
+impl PartialEq for Entry {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+impl Eq for Entry {}
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Entry {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.class
+            .cmp(&other.class)
+            .then(self.key.total_cmp(&other.key))
+            .then(other.node.cmp(&self.node))
+    }
+}
+
+/// A shading session: a tree, a shader and reusable scratch space.
+///
+/// Create one per thread with [`LightTree::shading`]; after the first few
+/// calls have grown its scratch, shading allocates nothing.
+///
+/// The view-less calls ([`shade`](Self::shade),
+/// [`shade_exact`](Self::shade_exact) and their `_occluded` forms) exist only
+/// for [`ViewIndependent`] shaders, so a view-dependent shader such as
+/// [`Phong`](crate::Phong) cannot be called without a view.
+#[derive(Debug)]
+pub struct Shading<'t, S: Shader> {
+    tree: &'t LightTree,
+    shader: S,
+    heap: BinaryHeap<Entry>,
+}
+
+impl LightTree {
+    /// A shading session for `shader` over this tree.
+    pub fn shading<S: Shader>(&self, shader: S) -> Shading<'_, S> {
+        Shading {
+            tree: self,
+            shader,
+            heap: BinaryHeap::new(),
+        }
+    }
+}
+
+/// Counters and sums of one call.
+#[derive(Default)]
+struct Tally {
+    settled: DVec3,
+    estimate: DVec3,
+    error: DVec3,
+    nodes: u32,
+    lights: u32,
+    classify: u32,
+    point: u32,
+    over_contribution: u32,
+    unbounded: u32,
+}
+
+fn surface(point: Vec3, normal: Vec3, view: Option<Vec3>) -> Result<Surface, ShadeError> {
+    if !point.is_finite() {
+        return Err(ShadeError::NonFinitePoint);
+    }
+    let unit = |v: Vec3| -> Option<DVec3> {
+        let v = v.as_dvec3();
+        let len = v.length();
+        (len.is_finite() && len > 0.0).then(|| v / len)
+    };
+    let normal = unit(normal).ok_or(ShadeError::InvalidNormal)?;
+    let view = match view {
+        Some(v) => unit(v).ok_or(ShadeError::InvalidView)?,
+        None => DVec3::ZERO,
+    };
+    Ok(Surface {
+        point: point.as_dvec3(),
+        normal,
+        view,
+    })
+}
+
+impl<'t, S: Shader> Shading<'t, S> {
+    /// The tree.
+    pub fn tree(&self) -> &'t LightTree {
+        self.tree
+    }
+
+    /// The shader.
+    pub fn shader(&self) -> &S {
+        &self.shader
+    }
+
+    /// Shades `point` seen from direction `view` (towards the eye), with no
+    /// occluders.
+    ///
+    /// Normals and views are normalized; see [`shade`](Self::shade).
+    ///
+    /// # Errors
+    /// As [`shade`](Self::shade), plus [`ShadeError::InvalidView`].
+    pub fn shade_view(
+        &mut self,
+        point: Vec3,
+        normal: Vec3,
+        view: Vec3,
+        threshold: Threshold,
+    ) -> Result<ShadeResult, ShadeError> {
+        self.run(point, normal, Some(view), threshold, &mut Unoccluded)
+    }
+
+    /// [`shade_view`](Self::shade_view) with the host's visibility.
+    ///
+    /// # Errors
+    /// As [`shade_view`](Self::shade_view).
+    pub fn shade_view_occluded<V: Visibility>(
+        &mut self,
+        point: Vec3,
+        normal: Vec3,
+        view: Vec3,
+        threshold: Threshold,
+        visibility: &mut V,
+    ) -> Result<ShadeResult, ShadeError> {
+        self.run(point, normal, Some(view), threshold, visibility)
+    }
+
+    /// The exact model summed over every light, seen from `view`.
+    ///
+    /// # Errors
+    /// [`ShadeError::NonFinitePoint`], [`ShadeError::InvalidNormal`],
+    /// [`ShadeError::InvalidView`].
+    pub fn shade_exact_view(
+        &self,
+        point: Vec3,
+        normal: Vec3,
+        view: Vec3,
+    ) -> Result<DVec3, ShadeError> {
+        self.exact(point, normal, Some(view), &mut Unoccluded)
+    }
+
+    /// [`shade_exact_view`](Self::shade_exact_view) with point-to-point
+    /// visibility `V_i` from the host for every light.
+    ///
+    /// # Errors
+    /// As [`shade_exact_view`](Self::shade_exact_view).
+    pub fn shade_exact_view_occluded<V: Visibility>(
+        &self,
+        point: Vec3,
+        normal: Vec3,
+        view: Vec3,
+        visibility: &mut V,
+    ) -> Result<DVec3, ShadeError> {
+        self.exact(point, normal, Some(view), visibility)
+    }
+
+    fn exact<V: Visibility>(
+        &self,
+        point: Vec3,
+        normal: Vec3,
+        view: Option<Vec3>,
+        visibility: &mut V,
+    ) -> Result<DVec3, ShadeError> {
+        let surface = surface(point, normal, view)?;
+        let frame = self.shader.frame(&surface);
+        // Neumaier-compensated summation: the sum is accurate to about 2 ulps
+        // whatever the number of lights.
+        let mut sum = DVec3::ZERO;
+        let mut compensation = DVec3::ZERO;
+        for light in &self.tree.lights {
+            if !V::ALWAYS_VISIBLE && !visibility.visible(point, light.position) {
+                continue;
+            }
+            let term = self.shader.eval(
+                &frame,
+                &surface,
+                light.position.as_dvec3(),
+                light.intensity.as_dvec3(),
+            );
+            let t = sum + term;
+            let big = sum.abs().cmpge(term.abs());
+            compensation += DVec3::select(big, (sum - t) + term, (term - t) + sum);
+            sum = t;
+        }
+        Ok(sum + compensation)
+    }
+
+    /// Evaluates `node` (entering the cut) and either settles it or pushes
+    /// it on the error list.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn enter<V: Visibility>(
+        &mut self,
+        index: usize,
+        mut visible: bool,
+        surface: &Surface,
+        frame: &S::Frame,
+        point: Vec3,
+        threshold: &Threshold,
+        visibility: &mut V,
+        tally: &mut Tally,
+    ) {
+        let node: &Node = &self.tree.nodes[index];
+        if node.light_count == 1 {
+            let light = self.tree.lights[node.first_light as usize];
+            self.exact_light(light.position, light.intensity, visible, surface, frame, point, visibility, tally);
+            return;
+        }
+        let mut partial = false;
+        if !V::ALWAYS_VISIBLE && !visible {
+            let bounds = node_bounds(self.tree, index);
+            tally.classify += 1;
+            match visibility.classify(point, &bounds) {
+                Coverage::Occluded => return,
+                Coverage::Visible => visible = true,
+                Coverage::Partial => partial = true,
+            }
+        }
+        tally.nodes += 1;
+        let Some(cone) = Cone::new(surface.point, node) else {
+            tally.unbounded += 1;
+            self.heap.push(Entry {
+                class: CLASS_UNBOUNDED,
+                key: f64::INFINITY,
+                node: index as u32,
+                visible,
+                estimate: DVec3::ZERO,
+                error: DVec3::ZERO,
+            });
+            return;
+        };
+        let mut bound = self.shader.bound(frame, surface, node, &cone);
+        if partial {
+            // Partially occluded: anything between 0 and the unoccluded upper
+            // bound. The host's visible fraction only moves the estimate.
+            let estimate = match visibility.visible_fraction(point, &node_bounds(self.tree, index)) {
+                Some(f) if f.is_finite() => bound.estimate * f64::from(f.clamp(0.0, 1.0)),
+                _ => 0.5 * bound.upper,
+            };
+            bound = NodeBound::new(estimate, DVec3::ZERO, bound.upper);
+        }
+        let error = bound.error();
+        let key = error.max_element();
+        let over = threshold
+            .max_contribution
+            .is_some_and(|m| bound.upper.max_element() > m);
+        if key <= 0.0 && !over {
+            // Nothing to gain by refining (e.g. below the horizon).
+            tally.settled += bound.estimate;
+            return;
+        }
+        let class = if over {
+            tally.over_contribution += 1;
+            CLASS_OVER_CONTRIBUTION
+        } else {
+            CLASS_ERROR
+        };
+        tally.estimate += bound.estimate;
+        tally.error += error;
+        self.heap.push(Entry {
+            class,
+            key,
+            node: index as u32,
+            visible,
+            estimate: bound.estimate,
+            error,
+        });
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn exact_light<V: Visibility>(
+        &self,
+        position: Vec3,
+        intensity: Vec3,
+        visible: bool,
+        surface: &Surface,
+        frame: &S::Frame,
+        point: Vec3,
+        visibility: &mut V,
+        tally: &mut Tally,
+    ) {
+        if !V::ALWAYS_VISIBLE && !visible {
+            tally.point += 1;
+            if !visibility.visible(point, position) {
+                return;
+            }
+        }
+        tally.lights += 1;
+        tally.settled += self.shader.eval(frame, surface, position.as_dvec3(), intensity.as_dvec3());
+    }
+
+    /// Sums of the error list, recomputed from scratch (the running sums
+    /// subtract and may drift).
+    fn heap_sums(&self) -> (DVec3, DVec3) {
+        let mut estimate = DVec3::ZERO;
+        let mut error = DVec3::ZERO;
+        for e in self.heap.iter() {
+            estimate += e.estimate;
+            error += e.error;
+        }
+        (estimate, error)
+    }
+
+    fn run<V: Visibility>(
+        &mut self,
+        point: Vec3,
+        normal: Vec3,
+        view: Option<Vec3>,
+        threshold: Threshold,
+        visibility: &mut V,
+    ) -> Result<ShadeResult, ShadeError> {
+        threshold.check()?;
+        let surface = surface(point, normal, view)?;
+        let frame = self.shader.frame(&surface);
+        let mut tally = Tally::default();
+        self.heap.clear();
+        let mut stop = Stop::ThresholdMet;
+        if !self.tree.nodes.is_empty() {
+            self.enter(0, false, &surface, &frame, point, &threshold, visibility, &mut tally);
+        }
+        let budget = threshold.budget.unwrap_or(u32::MAX);
+        loop {
+            if tally.unbounded == 0
+                && tally.over_contribution == 0
+                && threshold.met(tally.settled + tally.estimate, tally.error)
+            {
+                let (estimate, error) = self.heap_sums();
+                tally.estimate = estimate;
+                tally.error = error;
+                if threshold.met(tally.settled + estimate, error) {
+                    break;
+                }
+            }
+            let Some(top) = self.heap.peek().copied() else {
+                break;
+            };
+            let node = self.tree.nodes[top.node as usize];
+            let cost = if node.is_leaf() {
+                node.light_count
+            } else {
+                node.child_count
+            };
+            if tally.nodes + tally.lights + cost > budget.max(1) {
+                stop = Stop::Budget;
+                break;
+            }
+            self.heap.pop();
+            match top.class {
+                CLASS_UNBOUNDED => tally.unbounded -= 1,
+                CLASS_OVER_CONTRIBUTION => tally.over_contribution -= 1,
+                _ => {}
+            }
+            if top.class != CLASS_UNBOUNDED {
+                tally.estimate -= top.estimate;
+                tally.error -= top.error;
+            }
+            if node.is_leaf() {
+                for k in node.lights() {
+                    let l = self.tree.lights[k];
+                    self.exact_light(l.position, l.intensity, top.visible, &surface, &frame, point, visibility, &mut tally);
+                }
+            } else {
+                for child in node.children() {
+                    self.enter(child, top.visible, &surface, &frame, point, &threshold, visibility, &mut tally);
+                }
+            }
+        }
+        let (estimate, error) = self.heap_sums();
+        let radiance = tally.settled + estimate;
+        // The f64 sums above carry at most `terms * f64::EPSILON` relative
+        // error; fold it into the bound so that only the exact reference's own
+        // rounding is left to ROUNDING_ALLOWANCE.
+        let terms = (self.heap.len() + tally.lights as usize + 1) as f64 * f64::EPSILON;
+        let mut error_bound = error * (1.0 + terms) + (radiance.abs() + error) * terms;
+        if tally.unbounded > 0 {
+            error_bound = DVec3::INFINITY;
+        }
+        let _ = ROUNDING_ALLOWANCE;
+        Ok(ShadeResult {
+            radiance,
+            error_bound,
+            nodes_evaluated: tally.nodes,
+            lights_evaluated: tally.lights,
+            classify_queries: tally.classify,
+            point_queries: tally.point,
+            stop,
+        })
+    }
+}
+
+fn node_bounds(tree: &LightTree, index: usize) -> NodeBounds {
+    let node = &tree.nodes[index];
+    NodeBounds {
+        index: index as u32,
+        aabb: tree.boxes[index],
+        centroid: node.centroid,
+        radius: node.radius,
+        light_count: node.light_count,
+    }
+}
+
+impl<S: ViewIndependent> Shading<'_, S> {
+    /// Shades `point` with unit-or-not `normal` (normalized here), with no
+    /// occluders, refining the cut until `threshold` is met.
+    ///
+    /// # Errors
+    /// [`ShadeError::NonFinitePoint`], [`ShadeError::InvalidNormal`] (zero or
+    /// non-finite normal), [`ShadeError::InvalidThreshold`] (NaN or negative).
+    pub fn shade(
+        &mut self,
+        point: Vec3,
+        normal: Vec3,
+        threshold: Threshold,
+    ) -> Result<ShadeResult, ShadeError> {
+        self.run(point, normal, None, threshold, &mut Unoccluded)
+    }
+
+    /// [`shade`](Self::shade) with the host's visibility.
+    ///
+    /// # Errors
+    /// As [`shade`](Self::shade).
+    pub fn shade_occluded<V: Visibility>(
+        &mut self,
+        point: Vec3,
+        normal: Vec3,
+        threshold: Threshold,
+        visibility: &mut V,
+    ) -> Result<ShadeResult, ShadeError> {
+        self.run(point, normal, None, threshold, visibility)
+    }
+
+    /// The exact model (crate docs, "The model") summed over every light in
+    /// `f64` with compensated summation: the reference `shade` is certified
+    /// against.
+    ///
+    /// # Errors
+    /// [`ShadeError::NonFinitePoint`], [`ShadeError::InvalidNormal`].
+    pub fn shade_exact(&self, point: Vec3, normal: Vec3) -> Result<DVec3, ShadeError> {
+        self.exact(point, normal, None, &mut Unoccluded)
+    }
+
+    /// [`shade_exact`](Self::shade_exact) with point-to-point visibility.
+    ///
+    /// # Errors
+    /// As [`shade_exact`](Self::shade_exact).
+    pub fn shade_exact_occluded<V: Visibility>(
+        &self,
+        point: Vec3,
+        normal: Vec3,
+        visibility: &mut V,
+    ) -> Result<DVec3, ShadeError> {
+        self.exact(point, normal, None, visibility)
+    }
+}

@@ -1,0 +1,136 @@
+//! The shading point and the cone a node subtends from it.
+
+use glam::DVec3;
+
+use crate::tree::Node;
+
+/// Absolute widening applied to every cosine bound computed by
+/// [`Cone::cos_range`].
+///
+/// The cosine and sine of the angle to the cone's axis come from a dot and a
+/// cross product of unit `f64` vectors, each within a few `f64::EPSILON` of
+/// the exact value; the sum-of-angles formula adds two products. `16 *
+/// f64::EPSILON` (about `3.6e-15`) covers the accumulated absolute error, so
+/// the returned range contains every true cosine even when it is near 0,
+/// where a relative allowance would not help.
+pub const COS_SLACK: f64 = 16.0 * f64::EPSILON;
+
+/// Relative margin below which a node's ball is treated as containing the
+/// shading point: when `D - R <= D * MIN_CLEARANCE` (D the distance to the
+/// node's centre, R its radius), no finite bound is attempted and the node
+/// is always refined. Bounds grow like `(D / (D - R))^2` or faster, so such a
+/// node's bound would exceed `2^40` times its estimate anyway.
+pub const MIN_CLEARANCE: f64 = 1.0 / (1u64 << 20) as f64;
+
+/// The shading point, in `f64`, as the shaders see it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Surface {
+    /// Shading point `p`.
+    pub point: DVec3,
+    /// Unit surface normal `n` (normalized by the crate from the caller's).
+    pub normal: DVec3,
+    /// Unit direction from `p` towards the eye, or zero when the caller gave
+    /// none (only [`ViewIndependent`](crate::ViewIndependent) shaders are
+    /// shaded without a view).
+    pub view: DVec3,
+}
+
+/// The cone of directions, and the range of distances, under which a node's
+/// ball (centre `c`, radius `R`) is seen from the shading point `p`.
+///
+/// Exists only when the ball clears the point: `D = |c - p| > R` with margin
+/// [`MIN_CLEARANCE`]. Then every member at `x` satisfies
+/// `D - R <= |x - p| <= D + R`, and its direction `(x - p)/|x - p|` makes an
+/// angle of at most `delta` with the axis `(c - p)/D`, `sin(delta) = R/D`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    /// `c - p`.
+    pub offset: DVec3,
+    /// `D = |c - p|`.
+    pub distance: f64,
+    /// `1 / D`.
+    pub inv_distance: f64,
+    /// Unit axis `(c - p) / D`.
+    pub axis: DVec3,
+    /// `R`, the node's radius.
+    pub radius: f64,
+    /// `sin(delta) = R / D`, in `[0, 1)`.
+    pub sin_half_angle: f64,
+    /// `cos(delta) = sqrt(1 - (R/D)^2)`.
+    pub cos_half_angle: f64,
+}
+
+impl Cone {
+    /// The cone of `node` seen from `point`, or `None` when the node's ball
+    /// comes within [`MIN_CLEARANCE`] (relative) of the point, including
+    /// `point` at the centroid.
+    #[inline]
+    pub fn new(point: DVec3, node: &Node) -> Option<Self> {
+        let offset = node.centroid.as_dvec3() - point;
+        let distance = offset.length();
+        let radius = f64::from(node.radius);
+        // Also false for distance == 0.
+        if !(distance - radius > distance * MIN_CLEARANCE) {
+            return None;
+        }
+        let inv_distance = 1.0 / distance;
+        let s = radius * inv_distance;
+        Some(Self {
+            offset,
+            distance,
+            inv_distance,
+            axis: offset * inv_distance,
+            radius,
+            sin_half_angle: s,
+            // (1 - s)(1 + s) keeps full relative precision for s near 1.
+            cos_half_angle: ((1.0 - s) * (1.0 + s)).sqrt(),
+        })
+    }
+
+    /// Range `[cos_min, cos_max]` of the cosine of the angle between the unit
+    /// vector `dir` and the direction to any point of the ball.
+    ///
+    /// With `theta_c` the angle between `dir` and the axis and `delta` the
+    /// half-angle, the angle lies in `[max(0, theta_c - delta),
+    /// min(pi, theta_c + delta)]`, so
+    ///
+    /// ```text
+    /// cos_min = cos(theta_c + delta) = cos_c cos_d - sin_c sin_d
+    /// cos_max = 1                              if theta_c <= delta
+    ///         = cos_c cos_d + sin_c sin_d      otherwise
+    /// ```
+    ///
+    /// with `cos_c = dir . axis` and `sin_c = |dir x axis|` (no `acos`: it
+    /// loses half the digits near 0 and pi). When `theta_c + delta > pi` the
+    /// formula for `cos_min` is at most 0, which is all the shaders use. Both
+    /// ends are widened by [`COS_SLACK`] and clamped to `[-1, 1]`.
+    #[inline]
+    pub fn cos_range(&self, dir: DVec3) -> (f64, f64) {
+        let cos_c = dir.dot(self.axis);
+        let sin_c = dir.cross(self.axis).length();
+        let (sd, cd) = (self.sin_half_angle, self.cos_half_angle);
+        let hi = if cos_c >= cd {
+            1.0
+        } else {
+            cos_c * cd + sin_c * sd
+        };
+        let lo = cos_c * cd - sin_c * sd;
+        ((lo - COS_SLACK).max(-1.0), (hi + COS_SLACK).min(1.0))
+    }
+
+    /// `(D / (D - R))^2`: how much the nearest member can exceed the centre's
+    /// `1/D^2` falloff.
+    #[inline]
+    pub fn near_falloff(&self) -> f64 {
+        let k = 1.0 / (1.0 - self.sin_half_angle);
+        k * k
+    }
+
+    /// `(D / (D + R))^2`: how much the farthest member can fall short of the
+    /// centre's `1/D^2` falloff.
+    #[inline]
+    pub fn far_falloff(&self) -> f64 {
+        let k = 1.0 / (1.0 + self.sin_half_angle);
+        k * k
+    }
+}

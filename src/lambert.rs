@@ -1,0 +1,276 @@
+//! Diffuse (Lambert) reflection with a certified node bound.
+
+use glam::{DVec3, Vec3};
+
+use crate::ShadeError;
+use crate::geometry::{COS_SLACK, Cone, Surface};
+use crate::shader::{NodeBound, Shader, ViewIndependent};
+use crate::tree::Node;
+
+/// Relative allowance for `f64` rounding in the second-order estimate: it is
+/// a sum of a handful of products, each within a few ulps; the slack is
+/// applied to the magnitudes of its two terms, so it stays valid when they
+/// cancel. `64 * f64::EPSILON` is about `1.4e-14`.
+pub const SECOND_ORDER_SLACK: f64 = 64.0 * f64::EPSILON;
+
+/// Which node bound a shader uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum BoundKind {
+    /// The paper's bound: the interval of the shading term over the node's
+    /// ball, around the virtual light's value.
+    Paper,
+    /// The tightest certified bound the shader has (for [`Lambert`]: the
+    /// paper's interval intersected with the second-order Taylor interval,
+    /// with the first-order colour correction in the estimate).
+    #[default]
+    Tight,
+}
+
+/// Diffuse reflection: a light of intensity `I` at distance `d` in direction
+/// `w` contributes `I * kd * max(0, n . w) / d^2` (per channel; a light at
+/// `d = 0` contributes 0).
+///
+/// # Node bound
+/// For a node of intensity `I`, centroid `c`, radius `R`, seen at distance
+/// `D = |c - p| > R` (a [`Cone`] with half-angle `delta`, `sin delta = R/D`,
+/// and angle `theta_c` between `n` and the axis):
+///
+/// **Paper's bound** (slides "Diffuse Reflection Error Bound"), valid
+/// whenever `D > R`:
+///
+/// ```text
+/// I kd max(0, cos(theta_c + delta)) / (D + R)^2
+///     <= exact <= I kd max(0, cos(max(0, theta_c - delta))) / (D - R)^2
+/// ```
+///
+/// with the cosines from [`Cone::cos_range`] (sines and cosines, never
+/// `acos`). The estimate is the virtual light, `I kd max(0, cos theta_c) / D^2`.
+/// A ball wholly below the tangent plane contributes exactly 0.
+///
+/// **Second-order bound** (used by [`BoundKind::Tight`], the default), valid
+/// when the whole ball lies above the tangent plane (`n.(c - p) > R`), where
+/// `f(x) = n.(x - p) / |x - p|^3` is smooth. Taylor's theorem about `c` gives,
+/// per channel `k`,
+///
+/// ```text
+/// exact_k = kd_k [ I_k f(c) + grad f(c) . (I_k o_k) + sum_i I_ik rem_i ],
+/// |rem_i| <= 1/2 sum_jl sup|H_jl| |x_ij - c_j| |x_il - c_l|
+/// ```
+///
+/// where `o_k` is the node's per-channel first moment
+/// ([`Node::channel_offsets`]; it vanishes for members of one colour because
+/// the centroid is weight-averaged) and `H` the Hessian of `f` over the ball.
+/// The estimate includes the first-order term, so the error is second order.
+/// Because `I_ik <= w_i` (the weight is the largest channel) and by
+/// Cauchy-Schwarz, `sum_i I_ik |x_ij - c_j||x_il - c_l| <= W sqrt(S_jj S_ll)`
+/// with `S` the node's [`covariance`](Node::covariance) expressed in a frame
+/// `e1` (horizontal, towards `c`), `e2` (horizontal), `e3 = n`. In units of
+/// `D` (`rho = 1 - R/D`, `z+ = cos theta_c + R/D`, `a+ = sin theta_c + R/D`,
+/// `b+ = R/D`, `t_a = min(1, (a+/rho)^2)`, likewise `t_b`, `t_z`,
+/// `q = z+/rho^5`) the Hessian entries are bounded over the ball by
+///
+/// ```text
+/// |H11| <= q max(3, 15 t_a - 3)     |H12| <= 15 q min(sqrt(t_a t_b), 1/2)
+/// |H22| <= q max(3, 15 t_b - 3)     |H13| <= sqrt(t_a) max(3, 15 t_z - 3) / rho^4
+/// |H33| <= 9 q                      |H23| <= sqrt(t_b) max(3, 15 t_z - 3) / rho^4
+/// ```
+///
+/// and, isotropically, `||H|| <= 6 / rho^4` (the spectral norm of the Hessian
+/// of `z/r^3` at unit distance is at most 6, reached along the normal). The
+/// remainder uses the smaller of the per-axis and the isotropic sums. At
+/// grazing angles the per-axis one is far tighter: the horizontal entries are
+/// `O(z/r^5)`. The final interval is the intersection of the paper's and the
+/// second-order one, and the estimate is clamped into it.
+///
+/// Rounding: cosine bounds are widened by [`COS_SLACK`]; the second-order
+/// estimate by [`SECOND_ORDER_SLACK`] of its terms' magnitudes and by
+/// `f32::EPSILON` of the first-order term for the `f32` storage of the offsets;
+/// the quadratic forms of `S` by `f32::EPSILON * trace(S)` for the storage of
+/// its off-diagonal entries (its diagonal is rounded upward when stored).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lambert {
+    kd: DVec3,
+    kind: BoundKind,
+}
+
+impl Lambert {
+    /// Diffuse albedo `kd` per channel. Channels that are NaN or negative are
+    /// replaced by 0 (see [`Lambert::try_new`] for an error instead);
+    /// infinite ones are clamped to `f32::MAX`.
+    pub fn new(kd: Vec3) -> Self {
+        Self {
+            kd: sanitize(kd),
+            kind: BoundKind::Tight,
+        }
+    }
+
+    /// Like [`Lambert::new`], but refuses a NaN, infinite or negative channel.
+    ///
+    /// # Errors
+    /// [`ShadeError::InvalidMaterial`].
+    pub fn try_new(kd: Vec3) -> Result<Self, ShadeError> {
+        if !kd.is_finite() || kd.min_element() < 0.0 {
+            return Err(ShadeError::InvalidMaterial("kd must be finite and >= 0"));
+        }
+        Ok(Self::new(kd))
+    }
+
+    /// Selects the node bound (default [`BoundKind::Tight`]).
+    pub const fn with_bound(mut self, kind: BoundKind) -> Self {
+        self.kind = kind;
+        self
+    }
+
+    /// The albedo.
+    pub fn kd(&self) -> DVec3 {
+        self.kd
+    }
+}
+
+/// Replaces NaN and negative channels by 0 and infinities by `f32::MAX`.
+pub(crate) fn sanitize(v: Vec3) -> DVec3 {
+    let f = |x: f32| -> f64 {
+        if x.is_nan() || x < 0.0 {
+            0.0
+        } else {
+            f64::from(x.min(f32::MAX))
+        }
+    };
+    DVec3::new(f(v.x), f(v.y), f(v.z))
+}
+
+/// `e^T S e` for the symmetric matrix stored as `[xx, yy, zz, xy, xz, yz]`.
+#[inline]
+fn quadratic_form(s: &[f32; 6], e: DVec3) -> f64 {
+    let s = s.map(f64::from);
+    s[0] * e.x * e.x
+        + s[1] * e.y * e.y
+        + s[2] * e.z * e.z
+        + 2.0 * (s[3] * e.x * e.y + s[4] * e.x * e.z + s[5] * e.y * e.z)
+}
+
+/// A unit vector orthogonal to the unit vector `n`.
+#[inline]
+pub(crate) fn any_orthogonal(n: DVec3) -> DVec3 {
+    n.any_orthonormal_vector()
+}
+
+impl Shader for Lambert {
+    type Frame = ();
+
+    #[inline]
+    fn frame(&self, _surface: &Surface) {}
+
+    #[inline]
+    fn eval(&self, _: &(), surface: &Surface, position: DVec3, intensity: DVec3) -> DVec3 {
+        let delta = position - surface.point;
+        let d2 = delta.length_squared();
+        let z = surface.normal.dot(delta);
+        // d = 0 (a light on the shading point) and lights at or below the
+        // tangent plane contribute nothing.
+        if !(z > 0.0 && d2 > 0.0) {
+            return DVec3::ZERO;
+        }
+        intensity * self.kd * (z / (d2 * d2.sqrt()))
+    }
+
+    #[inline]
+    fn bound(&self, _: &(), surface: &Surface, node: &Node, cone: &Cone) -> NodeBound {
+        let n = surface.normal;
+        let (cos_lo, cos_hi) = cone.cos_range(n);
+        if cos_hi <= 0.0 {
+            // The whole ball lies below the tangent plane.
+            return NodeBound::ZERO;
+        }
+        let inv_d = cone.inv_distance;
+        let scale = node.intensity * self.kd * (inv_d * inv_d);
+        let z = n.dot(cone.axis);
+        let virtual_light = scale * z.max(0.0);
+        let lower = scale * (cos_lo.max(0.0) * cone.far_falloff());
+        let upper = scale * (cos_hi * cone.near_falloff());
+        let sd = cone.sin_half_angle;
+        if self.kind == BoundKind::Paper || !(z - sd > 4.0 * COS_SLACK) {
+            // Paper's bound only: requested, or the ball reaches the tangent
+            // plane, where f = max(0, z)/r^3 has a kink and Taylor fails.
+            return NodeBound::new(virtual_light, lower, upper);
+        }
+
+        // Second order, in units of D. Gradient of z/r^3 at the unit axis.
+        let grad = n - 3.0 * z * cone.axis;
+        let grad_len = grad.length();
+        let o = node.channel_offsets;
+        let offsets = DVec3::new(
+            grad.dot(o[0].as_dvec3()),
+            grad.dot(o[1].as_dvec3()),
+            grad.dot(o[2].as_dvec3()),
+        ) * inv_d;
+        let offset_lens =
+            DVec3::new(o[0].length() as f64, o[1].length() as f64, o[2].length() as f64)
+                * inv_d;
+        let first_order = scale * offsets;
+        let estimate = virtual_light + first_order;
+
+        // Hessian entry bounds over the ball.
+        let rho = 1.0 - sd;
+        let inv_rho = 1.0 / rho;
+        let sin_c = n.cross(cone.axis).length();
+        let t = |x: f64| (x * inv_rho).powi(2).min(1.0);
+        let (t_a, t_b, t_z) = (t(sin_c + sd), t(sd), t(z + sd));
+        let p4 = inv_rho.powi(4);
+        let q = (z + sd) * p4 * inv_rho;
+        let h11 = q * (15.0 * t_a - 3.0).max(3.0);
+        let h22 = q * (15.0 * t_b - 3.0).max(3.0);
+        let h33 = 9.0 * q;
+        let h12 = 15.0 * q * (t_a * t_b).sqrt().min(0.5);
+        let mixed_z = p4 * (15.0 * t_z - 3.0).max(3.0);
+        let h13 = t_a.sqrt() * mixed_z;
+        let h23 = t_b.sqrt() * mixed_z;
+
+        // Second moments along the local frame, in units of D^2.
+        let horizontal = cone.axis - z * n;
+        let h_len = horizontal.length();
+        let e1 = if h_len > 0.0 {
+            horizontal / h_len
+        } else {
+            any_orthogonal(n)
+        };
+        let e2 = n.cross(e1);
+        let cov = &node.covariance;
+        let inv_d2 = inv_d * inv_d;
+        let trace = node.mean_squared_radius() * inv_d2;
+        let pad = f32::EPSILON as f64 * trace;
+        let s11 = (quadratic_form(cov, e1) * inv_d2).max(0.0) + pad;
+        let s22 = (quadratic_form(cov, e2) * inv_d2).max(0.0) + pad;
+        let s33 = (quadratic_form(cov, n) * inv_d2).max(0.0) + pad;
+        let per_axis = 0.5
+            * (h11 * s11
+                + h22 * s22
+                + h33 * s33
+                + 2.0
+                    * (h12 * (s11 * s22).sqrt()
+                        + h13 * (s11 * s33).sqrt()
+                        + h23 * (s22 * s33).sqrt()));
+        let isotropic = 3.0 * p4 * trace;
+        let remainder_unit = per_axis.min(isotropic) * (1.0 + SECOND_ORDER_SLACK);
+        let remainder = self.kd * (node.weight * inv_d2 * remainder_unit);
+        let rounding = SECOND_ORDER_SLACK * (virtual_light + first_order.abs())
+            + f32::EPSILON as f64 * scale * grad_len * offset_lens;
+        let lo2 = estimate - remainder - rounding;
+        let hi2 = estimate + remainder + rounding;
+        let lo = lower.max(lo2);
+        let hi = upper.min(hi2);
+        if lo.cmpgt(hi).any() {
+            // Both intervals contain the exact value, so they overlap up to
+            // rounding; keep the paper's interval if they do not.
+            debug_assert!(
+                (lo - hi).max_element() <= 1e-9 * upper.max_element(),
+                "disjoint bounds: paper [{lower}, {upper}] second order [{lo2}, {hi2}]"
+            );
+            return NodeBound::new(virtual_light, lower, upper);
+        }
+        NodeBound::new(estimate, lo, hi)
+    }
+}
+
+impl ViewIndependent for Lambert {}

@@ -1,0 +1,42 @@
+//! Point lights, the input of the hierarchy.
+
+use glam::Vec3;
+
+/// An isotropic point light: a position and an RGB intensity.
+///
+/// The intensity is radiant intensity per channel (radiance units times
+/// squared distance): a light at distance `d` straight above a diffuse surface
+/// of albedo `kd` contributes `intensity * kd / d^2` (see the crate docs for the
+/// full model). Every channel must be finite and `>= 0`, and every coordinate
+/// finite with magnitude at most [`MAX_COORDINATE`](crate::MAX_COORDINATE);
+/// [`LightTree::build`](crate::LightTree::build) rejects anything else with a
+/// [`BuildError`](crate::BuildError) naming the light.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PointLight {
+    /// World-space position.
+    pub position: Vec3,
+    /// RGB radiant intensity, each channel `>= 0`.
+    pub intensity: Vec3,
+}
+
+impl PointLight {
+    /// A light at `position` with RGB `intensity`.
+    pub const fn new(position: Vec3, intensity: Vec3) -> Self {
+        Self {
+            position,
+            intensity,
+        }
+    }
+
+    /// The scalar weight this crate gives the light when it averages positions:
+    /// its largest channel.
+    ///
+    /// The largest channel is used (rather than luminance or the channel sum)
+    /// because it dominates every channel: `intensity[k] <= weight()` for each
+    /// `k`, which lets one scalar-weighted second moment bound the per-channel
+    /// second moments (see [`Lambert`](crate::Lambert)). For grey lights it is
+    /// the common channel value.
+    pub fn weight(&self) -> f32 {
+        self.intensity.max_element()
+    }
+}

@@ -1,0 +1,161 @@
+//! The `Shader` trait: exact evaluation of one light, a certified bound for a
+//! node.
+
+use glam::DVec3;
+
+use crate::geometry::{Cone, Surface};
+use crate::tree::Node;
+
+/// A certified estimate of a node's contribution, per RGB channel.
+///
+/// Contract: for every channel `k`, the exact contribution of the node's
+/// lights (as [`Shader::eval`] summed over them would give in exact
+/// arithmetic) lies in `[lower[k], upper[k]]`, and
+/// `lower[k] <= estimate[k] <= upper[k]`. The node's error is then at most
+/// `max(estimate - lower, upper - estimate)` per channel. Rounding: relative
+/// errors of order `1e-12` in the three values are allowed (the crate's
+/// [`ROUNDING_ALLOWANCE`](crate::ROUNDING_ALLOWANCE) absorbs them), absolute
+/// ones are not: where a value can cancel, widen it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeBound {
+    /// The estimate used for the node.
+    pub estimate: DVec3,
+    /// Certified lower bound (per channel).
+    pub lower: DVec3,
+    /// Certified upper bound (per channel); also the node's *maximal
+    /// contribution* used by the specular criterion.
+    pub upper: DVec3,
+}
+
+impl NodeBound {
+    /// A node that contributes nothing, with no error.
+    pub const ZERO: Self = Self {
+        estimate: DVec3::ZERO,
+        lower: DVec3::ZERO,
+        upper: DVec3::ZERO,
+    };
+
+    /// Error of the estimate per channel: `max(estimate - lower, upper -
+    /// estimate)`.
+    #[inline]
+    pub fn error(&self) -> DVec3 {
+        (self.estimate - self.lower).max(self.upper - self.estimate)
+    }
+
+    /// The interval `[lower, upper]` with `estimate` clamped into it.
+    #[inline]
+    pub fn new(estimate: DVec3, lower: DVec3, upper: DVec3) -> Self {
+        Self {
+            estimate: estimate.clamp(lower, upper.max(lower)),
+            lower,
+            upper: upper.max(lower),
+        }
+    }
+}
+
+/// A reflectance model with a bound for groups of lights.
+///
+/// An implementation gives the exact contribution of one point light and a
+/// certified [`NodeBound`] for a whole node of the [`LightTree`](crate::LightTree)
+/// from the node's stored data alone. The crate's cut (see
+/// [`Shading`](crate::Shading)) refines nodes until the bounds meet the
+/// requested threshold, and is only as certified as the bounds: a custom
+/// shader must guarantee [`NodeBound`]'s contract for every node whose
+/// [`Cone`] exists (nodes whose ball reaches the shading point have no cone
+/// and are always refined).
+///
+/// Everything is computed in `f64`. Implementations that need no view
+/// direction also implement the marker [`ViewIndependent`], which unlocks the
+/// view-less shading calls.
+///
+/// # Writing one
+/// `eval` must be the model (the crate's `shade_exact` sums it); `bound` may
+/// use the node's intensity, ball ([`Cone`]), weight, first and second
+/// moments ([`Node`]'s accessors document each). The simplest valid bound is
+/// the interval of the model over the ball: smallest and largest value of the
+/// BRDF times `1/(D + R)^2` and `1/(D - R)^2`, times the node's intensity.
+pub trait Shader {
+    /// Per-shading-point data the shader derives once per call (for Phong,
+    /// the mirror direction), passed back to `eval` and `bound`.
+    type Frame: Copy;
+
+    /// Derives the per-point data.
+    fn frame(&self, surface: &Surface) -> Self::Frame;
+
+    /// Exact RGB contribution of one light of `intensity` at `position`.
+    fn eval(
+        &self,
+        frame: &Self::Frame,
+        surface: &Surface,
+        position: DVec3,
+        intensity: DVec3,
+    ) -> DVec3;
+
+    /// Certified bound for all lights of `node`, seen under `cone`.
+    fn bound(&self, frame: &Self::Frame, surface: &Surface, node: &Node, cone: &Cone)
+    -> NodeBound;
+}
+
+/// Marker for shaders whose result does not depend on the view direction
+/// (such as [`Lambert`](crate::Lambert)); only they can be shaded with the
+/// view-less calls ([`Shading::shade`](crate::Shading::shade)), so a view
+/// dependent shader called without a view does not compile.
+pub trait ViewIndependent: Shader {}
+
+/// The sum of two shaders, e.g. `Combined::new(Lambert::new(kd),
+/// Phong::new(ks, e))`: contributions add, and so do bounds (the sum of two
+/// certified intervals is a certified interval of the sum).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Combined<A, B> {
+    /// First term.
+    pub first: A,
+    /// Second term.
+    pub second: B,
+}
+
+impl<A, B> Combined<A, B> {
+    /// `first + second`.
+    pub const fn new(first: A, second: B) -> Self {
+        Self { first, second }
+    }
+}
+
+impl<A: Shader, B: Shader> Shader for Combined<A, B> {
+    type Frame = (A::Frame, B::Frame);
+
+    #[inline]
+    fn frame(&self, surface: &Surface) -> Self::Frame {
+        (self.first.frame(surface), self.second.frame(surface))
+    }
+
+    #[inline]
+    fn eval(
+        &self,
+        frame: &Self::Frame,
+        surface: &Surface,
+        position: DVec3,
+        intensity: DVec3,
+    ) -> DVec3 {
+        self.first.eval(&frame.0, surface, position, intensity)
+            + self.second.eval(&frame.1, surface, position, intensity)
+    }
+
+    #[inline]
+    fn bound(
+        &self,
+        frame: &Self::Frame,
+        surface: &Surface,
+        node: &Node,
+        cone: &Cone,
+    ) -> NodeBound {
+        let a = self.first.bound(&frame.0, surface, node, cone);
+        let b = self.second.bound(&frame.1, surface, node, cone);
+        NodeBound {
+            estimate: a.estimate + b.estimate,
+            lower: a.lower + b.lower,
+            upper: a.upper + b.upper,
+        }
+    }
+}
+
+impl<A: ViewIndependent, B: ViewIndependent> ViewIndependent for Combined<A, B> {}

@@ -1,0 +1,221 @@
+//! The light hierarchy: flat storage of virtual-light nodes.
+
+use core::ops::Range;
+
+use glam::{DVec3, Vec3};
+
+use crate::build::TreeBuilder;
+use crate::{BuildError, PointLight};
+
+/// An axis-aligned box, `min <= max` per axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Smallest corner.
+    pub min: Vec3,
+    /// Largest corner.
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// Whether `p` lies in the closed box.
+    pub fn contains(&self, p: Vec3) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+}
+
+/// One node of a [`LightTree`]: a *virtual light* standing for every light
+/// below it, with the data the bounds need.
+///
+/// With `w_i = max_k I_ik` the weight of light `i` ([`PointLight::weight`]),
+/// the node stores, over its member lights `i` (positions `x_i`, RGB
+/// intensities `I_i`):
+///
+/// * [`intensity`](Self::intensity) `= sum_i I_i` (per channel, in `f64` so
+///   that sums of lights near `f32::MAX` do not overflow);
+/// * [`weight`](Self::weight) `W = sum_i w_i`;
+/// * [`centroid`](Self::centroid) `c = sum_i w_i x_i / W` rounded to `f32`
+///   (the virtual light's position; the plain mean of the positions when
+///   `W = 0`). Every other moment is taken about this *stored* `c`, so the
+///   bounds hold for the value actually stored;
+/// * [`radius`](Self::radius) `R >= max_i |x_i - c|`, rounded upward;
+/// * [`channel_offsets`](Self::channel_offsets) `o_k = sum_i I_ik (x_i - c) / I_k`
+///   per channel `k` (zero when `I_k = 0`): the first moment that the scalar
+///   weight does not cancel when member colours differ;
+/// * [`covariance`](Self::covariance) `S = sum_i w_i (x_i - c)(x_i - c)^T / W`,
+///   diagonal rounded upward.
+///
+/// Its lights occupy a contiguous range of the tree's leaf order; its children,
+/// if any, a contiguous range of the node array.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Node {
+    pub(crate) intensity: DVec3,
+    pub(crate) weight: f64,
+    pub(crate) centroid: Vec3,
+    pub(crate) radius: f32,
+    pub(crate) channel_offsets: [Vec3; 3],
+    /// xx, yy, zz, xy, xz, yz
+    pub(crate) covariance: [f32; 6],
+    pub(crate) first_light: u32,
+    pub(crate) light_count: u32,
+    pub(crate) first_child: u32,
+    pub(crate) child_count: u32,
+}
+
+impl Node {
+    /// Summed RGB intensity of the member lights.
+    #[inline]
+    pub fn intensity(&self) -> DVec3 {
+        self.intensity
+    }
+    /// Summed scalar weight `W` (largest channel per light).
+    #[inline]
+    pub fn weight(&self) -> f64 {
+        self.weight
+    }
+    /// Position of the virtual light: the weight-averaged member position.
+    #[inline]
+    pub fn centroid(&self) -> Vec3 {
+        self.centroid
+    }
+    /// Radius of a ball about [`centroid`](Self::centroid) holding every member.
+    #[inline]
+    pub fn radius(&self) -> f32 {
+        self.radius
+    }
+    /// Per-channel first moment about the centroid, divided by the channel's
+    /// intensity: `o_k = sum_i I_ik (x_i - c) / I_k`.
+    #[inline]
+    pub fn channel_offsets(&self) -> [Vec3; 3] {
+        self.channel_offsets
+    }
+    /// Weight-normalized second moment matrix about the centroid as
+    /// `[xx, yy, zz, xy, xz, yz]`; its trace is the mean squared member
+    /// distance `sum_i w_i |x_i - c|^2 / W`.
+    #[inline]
+    pub fn covariance(&self) -> [f32; 6] {
+        self.covariance
+    }
+    /// Trace of [`covariance`](Self::covariance): `sum_i w_i |x_i - c|^2 / W`.
+    #[inline]
+    pub fn mean_squared_radius(&self) -> f64 {
+        let s = self.covariance;
+        f64::from(s[0]) + f64::from(s[1]) + f64::from(s[2])
+    }
+    /// Whether the node has no children (its lights are evaluated directly).
+    #[inline]
+    pub fn is_leaf(&self) -> bool {
+        self.child_count == 0
+    }
+    /// Range of the node's lights in the tree's leaf order
+    /// ([`LightTree::lights`]).
+    #[inline]
+    pub fn lights(&self) -> Range<usize> {
+        self.first_light as usize..(self.first_light + self.light_count) as usize
+    }
+    /// Number of lights below the node.
+    #[inline]
+    pub fn light_count(&self) -> usize {
+        self.light_count as usize
+    }
+    /// Range of the node's children in the node array ([`LightTree::nodes`]);
+    /// empty for a leaf.
+    #[inline]
+    pub fn children(&self) -> Range<usize> {
+        self.first_child as usize..(self.first_child + self.child_count) as usize
+    }
+}
+
+/// A hierarchy of point lights whose nodes are virtual lights (Paquette,
+/// Poulin and Drettakis 1998, slides "Construction").
+///
+/// Built once from a slice of [`PointLight`]s with [`LightTree::build`] (or
+/// [`LightTree::builder`] for options); shaded through
+/// [`LightTree::shading`]. Storage is flat: nodes in one vector (children of
+/// a node contiguous, root first), lights reordered into leaf order in
+/// another, with [`original_index`](Self::original_index) mapping back to the
+/// caller's order, and node boxes in a third vector that only visibility
+/// queries read.
+#[derive(Clone, Debug)]
+pub struct LightTree {
+    pub(crate) nodes: Vec<Node>,
+    pub(crate) boxes: Vec<Aabb>,
+    pub(crate) lights: Vec<PointLight>,
+    pub(crate) order: Vec<u32>,
+    pub(crate) depth: u32,
+}
+
+impl LightTree {
+    /// Builds a tree with the default options of [`TreeBuilder`].
+    ///
+    /// An empty slice gives an empty tree, which shades to zero with zero
+    /// error.
+    ///
+    /// # Errors
+    /// A [`BuildError`] naming the first light with a non-finite or
+    /// out-of-range position, or a non-finite or negative intensity channel.
+    pub fn build(lights: &[PointLight]) -> Result<Self, BuildError> {
+        TreeBuilder::new().build(lights)
+    }
+
+    /// A builder carrying the options (maximum lights per leaf, maximum depth).
+    pub fn builder() -> TreeBuilder {
+        TreeBuilder::new()
+    }
+
+    /// The nodes, root first; empty for an empty tree.
+    #[inline]
+    pub fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+
+    /// The root node, `None` for an empty tree.
+    #[inline]
+    pub fn root(&self) -> Option<&Node> {
+        self.nodes.first()
+    }
+
+    /// Tight axis-aligned box of node `index`'s lights.
+    #[inline]
+    pub fn node_box(&self, index: usize) -> Aabb {
+        self.boxes[index]
+    }
+
+    /// The lights in leaf order (the order node light ranges refer to).
+    #[inline]
+    pub fn lights(&self) -> &[PointLight] {
+        &self.lights
+    }
+
+    /// Index in the caller's slice of the light at `leaf_index` in leaf order.
+    #[inline]
+    pub fn original_index(&self, leaf_index: usize) -> usize {
+        self.order[leaf_index] as usize
+    }
+
+    /// Number of lights.
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.lights.len()
+    }
+
+    /// Whether the tree holds no light.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.lights.is_empty()
+    }
+
+    /// Number of levels below the root (0 for a single leaf).
+    #[inline]
+    pub fn depth(&self) -> u32 {
+        self.depth
+    }
+
+    /// Heap memory held by the tree, in bytes (nodes, boxes, lights, index
+    /// map).
+    pub fn memory_bytes(&self) -> usize {
+        self.nodes.capacity() * size_of::<Node>()
+            + self.boxes.capacity() * size_of::<Aabb>()
+            + self.lights.capacity() * size_of::<PointLight>()
+            + self.order.capacity() * size_of::<u32>()
+    }
+}

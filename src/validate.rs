@@ -1,0 +1,130 @@
+//! The tree's public invariant checker.
+
+use glam::DVec3;
+
+use crate::tree::LightTree;
+use crate::ValidationError;
+
+/// Relative tolerance when comparing a node's stored intensity with the sum
+/// of its children's: both are `f64` sums of the same `f32` values in
+/// different orders, which agree to `n * f64::EPSILON` relative for `n`
+/// terms; `1e-9` covers a million lights with margin.
+const SUM_TOLERANCE: f64 = 1e-9;
+
+impl LightTree {
+    /// Checks the tree's invariants and returns the first one broken.
+    ///
+    /// * Every node's light range is the concatenation of its children's, and
+    ///   the root's is every light: each light lies in exactly one leaf.
+    /// * The index map back to the caller's order is a permutation.
+    /// * Every node's intensity is the sum of its children's (leaves: of
+    ///   their lights), to `f64` rounding.
+    /// * Every member light lies inside its node's stored ball (`|x - c| <= R`)
+    ///   and box, and the stored diagonal second moments are at least the
+    ///   members' (they are rounded upward).
+    /// * Every stored value is finite.
+    ///
+    /// Time `O(n * depth)`. Property tests call it on every tree they build.
+    ///
+    /// # Errors
+    /// The first [`ValidationError`] found.
+    pub fn validate(&self) -> Result<(), ValidationError> {
+        let n = self.lights.len();
+        if self.order.len() != n {
+            return Err(ValidationError::BadCover);
+        }
+        let mut seen = vec![false; n];
+        for &k in &self.order {
+            let k = k as usize;
+            if k >= n || seen[k] {
+                return Err(ValidationError::BadCover);
+            }
+            seen[k] = true;
+        }
+        if n == 0 {
+            return if self.nodes.is_empty() {
+                Ok(())
+            } else {
+                Err(ValidationError::BadCover)
+            };
+        }
+        if self.nodes.is_empty() || self.nodes[0].lights() != (0..n) {
+            return Err(ValidationError::BadCover);
+        }
+        if self.boxes.len() != self.nodes.len() {
+            return Err(ValidationError::BadCover);
+        }
+        let mut leaf_cover = 0usize;
+        for (i, node) in self.nodes.iter().enumerate() {
+            let finite = node.intensity.is_finite()
+                && node.weight.is_finite()
+                && node.centroid.is_finite()
+                && node.radius.is_finite()
+                && node.channel_offsets.iter().all(|o| o.is_finite())
+                && node.covariance.iter().all(|v| v.is_finite());
+            if !finite {
+                return Err(ValidationError::NonFinite { node: i });
+            }
+            let range = node.lights();
+            if range.end > n {
+                return Err(ValidationError::BadChildRange { node: i });
+            }
+            let members = &self.lights[range.clone()];
+            let sum = if node.is_leaf() {
+                leaf_cover += range.len();
+                members.iter().map(|l| l.intensity.as_dvec3()).sum::<DVec3>()
+            } else {
+                let children = node.children();
+                if children.start <= i || children.end > self.nodes.len() {
+                    return Err(ValidationError::BadChildRange { node: i });
+                }
+                let mut next = range.start;
+                let mut sum = DVec3::ZERO;
+                for child in &self.nodes[children] {
+                    if child.lights().start != next || child.light_count == 0 {
+                        return Err(ValidationError::BadChildRange { node: i });
+                    }
+                    next = child.lights().end;
+                    sum += child.intensity;
+                }
+                if next != range.end {
+                    return Err(ValidationError::BadChildRange { node: i });
+                }
+                sum
+            };
+            let tol = SUM_TOLERANCE * node.intensity.max_element().max(sum.max_element());
+            if (sum - node.intensity).abs().max_element() > tol {
+                return Err(ValidationError::IntensityMismatch { node: i });
+            }
+            let c = node.centroid.as_dvec3();
+            let r = f64::from(node.radius);
+            let bbox = self.boxes[i];
+            let mut second = [0.0f64; 3];
+            for (k, l) in members.iter().enumerate() {
+                let d = l.position.as_dvec3() - c;
+                if d.length() > r || !bbox.contains(l.position) {
+                    return Err(ValidationError::LightOutsideBounds {
+                        node: i,
+                        light: range.start + k,
+                    });
+                }
+                let w = f64::from(l.weight());
+                second[0] += w * d.x * d.x;
+                second[1] += w * d.y * d.y;
+                second[2] += w * d.z * d.z;
+            }
+            if node.weight > 0.0 {
+                for axis in 0..3 {
+                    let stored = f64::from(node.covariance[axis]) * node.weight;
+                    if second[axis] > stored * (1.0 + SUM_TOLERANCE) {
+                        return Err(ValidationError::MomentMismatch { node: i });
+                    }
+                }
+            }
+        }
+        if leaf_cover != n {
+            return Err(ValidationError::BadCover);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,110 @@
+//! Visibility: the host's Warnock-style answers about occlusion.
+
+use glam::Vec3;
+
+use crate::tree::Aabb;
+
+/// How much of a node the host sees from the shading point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Coverage {
+    /// Every segment from the shading point to any point of the node's box
+    /// is unoccluded: the node is used as if there were no occluders.
+    Visible,
+    /// Every such segment is blocked: the node contributes exactly 0.
+    Occluded,
+    /// Neither is certain: the node's contribution lies in `[0, unoccluded
+    /// upper bound]`; it is refined, and at a leaf each light is asked
+    /// point-to-point.
+    Partial,
+}
+
+/// What the cut tells the host about a node it asks to classify.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeBounds {
+    /// Index of the node in [`LightTree::nodes`](crate::LightTree::nodes).
+    pub index: u32,
+    /// Tight box of the node's lights.
+    pub aabb: Aabb,
+    /// The virtual light's position.
+    pub centroid: Vec3,
+    /// Radius of a ball about `centroid` holding every light of the node.
+    pub radius: f32,
+    /// Number of lights below the node.
+    pub light_count: u32,
+}
+
+/// Occlusion answers supplied by the host renderer (its ray tracer).
+///
+/// # Contract
+/// The crate's error bound is certified whenever the host is *conservative*:
+///
+/// * [`classify`](Self::classify) returns [`Coverage::Visible`] only if no
+///   occluder meets any segment from `point` to any point of `node.aabb`,
+///   and [`Coverage::Occluded`] only if every such segment is blocked. When
+///   unsure it returns [`Coverage::Partial`], which is always correct.
+/// * [`visible`](Self::visible) is the exact point-to-point visibility `V_i`
+///   that the model (and `shade_exact`) uses.
+/// * [`visible_fraction`](Self::visible_fraction) may be any estimate in
+///   `[0, 1]`, e.g. volumetric visibility after Sillion 1995: it changes the
+///   estimate of a partially occluded node, never its certified interval
+///   `[0, upper]`.
+///
+/// A host that answers non-conservatively gets estimates, not certified
+/// bounds. The methods take `&mut self` so a host can keep per-thread ray
+/// caches or counters.
+pub trait Visibility {
+    /// `true` for a host that never reports occlusion; the cut then skips
+    /// every visibility call at compile time. Leave it `false`.
+    const ALWAYS_VISIBLE: bool = false;
+
+    /// Classifies `node`'s box as seen from `point`.
+    fn classify(&mut self, point: Vec3, node: &NodeBounds) -> Coverage;
+
+    /// Whether the segment from `point` to a light at `light` is unoccluded.
+    fn visible(&mut self, point: Vec3, light: Vec3) -> bool;
+
+    /// Optional estimate of the visible fraction of a partially occluded
+    /// node, in `[0, 1]`. The default, `None`, makes the cut use the middle of
+    /// the certified interval `[0, upper]`.
+    fn visible_fraction(&mut self, point: Vec3, node: &NodeBounds) -> Option<f32> {
+        let _ = (point, node);
+        None
+    }
+}
+
+/// No occluders: every node is visible. Compiles to nothing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Unoccluded;
+
+impl Visibility for Unoccluded {
+    const ALWAYS_VISIBLE: bool = true;
+
+    #[inline(always)]
+    fn classify(&mut self, _point: Vec3, _node: &NodeBounds) -> Coverage {
+        Coverage::Visible
+    }
+
+    #[inline(always)]
+    fn visible(&mut self, _point: Vec3, _light: Vec3) -> bool {
+        true
+    }
+}
+
+impl<V: Visibility> Visibility for &mut V {
+    const ALWAYS_VISIBLE: bool = V::ALWAYS_VISIBLE;
+
+    #[inline]
+    fn classify(&mut self, point: Vec3, node: &NodeBounds) -> Coverage {
+        (**self).classify(point, node)
+    }
+
+    #[inline]
+    fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
+        (**self).visible(point, light)
+    }
+
+    #[inline]
+    fn visible_fraction(&mut self, point: Vec3, node: &NodeBounds) -> Option<f32> {
+        (**self).visible_fraction(point, node)
+    }
+}
