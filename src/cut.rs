@@ -10,7 +10,7 @@ use crate::geometry::{Cone, Surface};
 use crate::shader::{NodeBound, Shader, ViewIndependent};
 use crate::tree::{LightTree, Node};
 use crate::visibility::{Coverage, NodeBounds, Unoccluded, Visibility};
-use crate::{ROUNDING_ALLOWANCE, ShadeError};
+use crate::ShadeError;
 
 /// What the summed error bound is compared with.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -176,6 +176,10 @@ impl ShadeResult {
     }
 }
 
+/// Relative widening of the summed error bound for the rounding of its
+/// compensated sum (a few ulps; 8 leaves margin).
+const SUM_SLACK: f64 = 8.0 * f64::EPSILON;
+
 /// Priority classes of the error list, refined in this order.
 const CLASS_ERROR: u8 = 0;
 /// Above the maximal-contribution threshold.
@@ -244,10 +248,34 @@ impl LightTree {
     }
 }
 
+/// Neumaier-compensated sum of `DVec3`s: accurate to about two ulps of the
+/// sum of magnitudes, whatever the number of terms.
+#[derive(Clone, Copy, Default)]
+pub(crate) struct CompensatedSum {
+    sum: DVec3,
+    compensation: DVec3,
+}
+
+impl CompensatedSum {
+    #[inline]
+    pub(crate) fn add(&mut self, term: DVec3) {
+        let t = self.sum + term;
+        let big = self.sum.abs().cmpge(term.abs());
+        self.compensation += DVec3::select(big, (self.sum - t) + term, (term - t) + self.sum);
+        self.sum = t;
+    }
+
+    #[inline]
+    pub(crate) fn value(&self) -> DVec3 {
+        self.sum + self.compensation
+    }
+}
+
 /// Counters and sums of one call.
 #[derive(Default)]
 struct Tally {
-    settled: DVec3,
+    /// Exact leaves and nodes that need no refinement.
+    settled: CompensatedSum,
     estimate: DVec3,
     error: DVec3,
     nodes: u32,
@@ -360,10 +388,7 @@ impl<'t, S: Shader> Shading<'t, S> {
     ) -> Result<DVec3, ShadeError> {
         let surface = surface(point, normal, view)?;
         let frame = self.shader.frame(&surface);
-        // Neumaier-compensated summation: the sum is accurate to about 2 ulps
-        // whatever the number of lights.
-        let mut sum = DVec3::ZERO;
-        let mut compensation = DVec3::ZERO;
+        let mut sum = CompensatedSum::default();
         for light in &self.tree.lights {
             if !V::ALWAYS_VISIBLE && !visibility.visible(point, light.position) {
                 continue;
@@ -374,12 +399,9 @@ impl<'t, S: Shader> Shading<'t, S> {
                 light.position.as_dvec3(),
                 light.intensity.as_dvec3(),
             );
-            let t = sum + term;
-            let big = sum.abs().cmpge(term.abs());
-            compensation += DVec3::select(big, (sum - t) + term, (term - t) + sum);
-            sum = t;
+            sum.add(term);
         }
-        Ok(sum + compensation)
+        Ok(sum.value())
     }
 
     /// Evaluates `node` (entering the cut) and either settles it or pushes
@@ -443,7 +465,7 @@ impl<'t, S: Shader> Shading<'t, S> {
             .is_some_and(|m| bound.upper.max_element() > m);
         if key <= 0.0 && !over {
             // Nothing to gain by refining (e.g. below the horizon).
-            tally.settled += bound.estimate;
+            tally.settled.add(bound.estimate);
             return;
         }
         let class = if over {
@@ -484,19 +506,19 @@ impl<'t, S: Shader> Shading<'t, S> {
             }
         }
         tally.lights += 1;
-        tally.settled += self.shader.eval(frame, surface, position.as_dvec3(), intensity.as_dvec3());
+        tally.settled.add(self.shader.eval(frame, surface, position.as_dvec3(), intensity.as_dvec3()));
     }
 
     /// Sums of the error list, recomputed from scratch (the running sums
     /// subtract and may drift).
     fn heap_sums(&self) -> (DVec3, DVec3) {
-        let mut estimate = DVec3::ZERO;
-        let mut error = DVec3::ZERO;
+        let mut estimate = CompensatedSum::default();
+        let mut error = CompensatedSum::default();
         for e in self.heap.iter() {
-            estimate += e.estimate;
-            error += e.error;
+            estimate.add(e.estimate);
+            error.add(e.error);
         }
-        (estimate, error)
+        (estimate.value(), error.value())
     }
 
     fn run<V: Visibility>(
@@ -520,12 +542,12 @@ impl<'t, S: Shader> Shading<'t, S> {
         loop {
             if tally.unbounded == 0
                 && tally.over_contribution == 0
-                && threshold.met(tally.settled + tally.estimate, tally.error)
+                && threshold.met(tally.settled.value() + tally.estimate, tally.error)
             {
                 let (estimate, error) = self.heap_sums();
                 tally.estimate = estimate;
                 tally.error = error;
-                if threshold.met(tally.settled + estimate, error) {
+                if threshold.met(tally.settled.value() + estimate, error) {
                     break;
                 }
             }
@@ -564,16 +586,16 @@ impl<'t, S: Shader> Shading<'t, S> {
             }
         }
         let (estimate, error) = self.heap_sums();
-        let radiance = tally.settled + estimate;
-        // The f64 sums above carry at most `terms * f64::EPSILON` relative
-        // error; fold it into the bound so that only the exact reference's own
-        // rounding is left to ROUNDING_ALLOWANCE.
-        let terms = (self.heap.len() + tally.lights as usize + 1) as f64 * f64::EPSILON;
-        let mut error_bound = error * (1.0 + terms) + (radiance.abs() + error) * terms;
-        if tally.unbounded > 0 {
-            error_bound = DVec3::INFINITY;
-        }
-        let _ = ROUNDING_ALLOWANCE;
+        let radiance = tally.settled.value() + estimate;
+        // Compensated sums are within a few ulps of the sums of magnitudes:
+        // what that leaves of the estimate's rounding is within
+        // ROUNDING_ALLOWANCE of the exact value (terms are non-negative); the
+        // error sum's own rounding is folded in here.
+        let error_bound = if tally.unbounded > 0 {
+            DVec3::INFINITY
+        } else {
+            error * (1.0 + SUM_SLACK)
+        };
         Ok(ShadeResult {
             radiance,
             error_bound,
