@@ -425,6 +425,11 @@ impl<'t, S: Shader> Shading<'t, S> {
             self.exact_light(light.position, light.intensity, visible, surface, frame, point, visibility, tally);
             return;
         }
+        if node.intensity == DVec3::ZERO {
+            // Dark node: exactly zero whatever its geometry, even when its
+            // ball holds the shading point.
+            return;
+        }
         let mut partial = false;
         if !V::ALWAYS_VISIBLE && !visible {
             let bounds = node_bounds(self.tree, index);
