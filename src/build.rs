@@ -86,7 +86,6 @@ impl TreeBuilder {
         let mut order: Vec<u32> = (0..n as u32).collect();
         let mut tree = LightTree {
             nodes: Vec::new(),
-            boxes: Vec::new(),
             lights: Vec::new(),
             order: Vec::new(),
             depth: 0,
@@ -98,13 +97,11 @@ impl TreeBuilder {
         // are contiguous. `depths[i]` is node i's depth.
         let mut depths: Vec<u32> = vec![0];
         let mut scratch: Vec<u32> = Vec::with_capacity(n);
-        let (root, root_box) = node_stats(lights, &order, 0..n);
-        tree.nodes.push(root);
-        tree.boxes.push(root_box);
+        tree.nodes.push(node_stats(lights, &order, 0..n));
         let mut i = 0;
         while i < tree.nodes.len() {
             let node = tree.nodes[i];
-            let bbox = tree.boxes[i];
+            let bbox = node.bbox;
             let depth = depths[i];
             tree.depth = tree.depth.max(depth);
             if node.light_count as usize > self.max_leaf_lights && depth < self.max_depth {
@@ -115,9 +112,7 @@ impl TreeBuilder {
                     tree.nodes[i].child_count = groups.len() as u32;
                     for g in groups {
                         let r = range.start + g.start..range.start + g.end;
-                        let (child, child_box) = node_stats(lights, &order, r);
-                        tree.nodes.push(child);
-                        tree.boxes.push(child_box);
+                        tree.nodes.push(node_stats(lights, &order, r));
                         depths.push(depth + 1);
                     }
                 }
@@ -127,7 +122,6 @@ impl TreeBuilder {
         tree.lights = order.iter().map(|&k| lights[k as usize]).collect();
         tree.order = order;
         tree.nodes.shrink_to_fit();
-        tree.boxes.shrink_to_fit();
         Ok(tree)
     }
 }
@@ -158,11 +152,10 @@ impl LightTree {
         let identity: Vec<u32> = (0..self.lights.len() as u32).collect();
         for i in 0..self.nodes.len() {
             let old = self.nodes[i];
-            let (mut fresh, bbox) = node_stats(&self.lights, &identity, old.lights());
+            let mut fresh = node_stats(&self.lights, &identity, old.lights());
             fresh.first_child = old.first_child;
             fresh.child_count = old.child_count;
             self.nodes[i] = fresh;
-            self.boxes[i] = bbox;
         }
         Ok(())
     }
@@ -259,12 +252,8 @@ pub(crate) fn round_up_f32(x: f64) -> f32 {
 }
 
 /// Computes a node's statistics over `lights[idx[range]]` (all in `f64`,
-/// then stored as documented on [`Node`]) and its tight box.
-fn node_stats(
-    lights: &[PointLight],
-    idx: &[u32],
-    range: core::ops::Range<usize>,
-) -> (Node, Aabb) {
+/// then stored as documented on [`Node`]).
+fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>) -> Node {
     let members = &idx[range.clone()];
     let mut intensity = DVec3::ZERO;
     let mut weight = 0.0f64;
@@ -332,17 +321,20 @@ fn node_stats(
             };
         }
     }
-    let node = Node {
+    Node {
         intensity,
         weight,
         centroid,
         radius,
         channel_offsets: [offset(0), offset(1), offset(2)],
         covariance,
+        bbox: Aabb {
+            min: bmin,
+            max: bmax,
+        },
         first_light: range.start as u32,
         light_count: members.len() as u32,
         first_child: 0,
         child_count: 0,
-    };
-    (node, Aabb { min: bmin, max: bmax })
+    }
 }

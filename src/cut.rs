@@ -617,7 +617,7 @@ fn node_bounds(tree: &LightTree, index: usize) -> NodeBounds {
     let node = &tree.nodes[index];
     NodeBounds {
         index: index as u32,
-        aabb: tree.boxes[index],
+        aabb: node.bbox,
         centroid: node.centroid,
         radius: node.radius,
         light_count: node.light_count,

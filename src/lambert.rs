@@ -3,7 +3,7 @@
 use glam::{DVec3, Vec3};
 
 use crate::ShadeError;
-use crate::geometry::{COS_SLACK, Cone, Surface};
+use crate::geometry::{Cone, Surface};
 use crate::shader::{NodeBound, Shader, ViewIndependent};
 use crate::tree::Node;
 
@@ -49,14 +49,21 @@ pub enum BoundKind {
 /// A ball wholly below the tangent plane contributes exactly 0.
 ///
 /// **Second-order bound** (used by [`BoundKind::Tight`], the default), valid
-/// when the whole ball lies above the tangent plane (`n.(c - p) > R`), where
-/// `f(x) = n.(x - p) / |x - p|^3` is smooth. Taylor's theorem about `c` gives,
-/// per channel `k`,
+/// whenever `D > R`. The shading term is `f = max(0, g)` with
+/// `g(x) = n.(x - p) / |x - p|^3`, smooth away from `p`. Taylor's theorem
+/// for `g` about `c` gives, per channel `k`,
 ///
 /// ```text
-/// exact_k = kd_k [ I_k f(c) + grad f(c) . (I_k o_k) + sum_i I_ik rem_i ],
+/// sum_i I_ik g(x_i) = I_k g(c) + grad g(c) . (I_k o_k) + sum_i I_ik rem_i,
 /// |rem_i| <= 1/2 sum_jl sup|H_jl| |x_ij - c_j| |x_il - c_l|
 /// ```
+///
+/// and `0 <= f - g <= max(0, R - n.(c - p)) / (D - R)^3` on the ball (the
+/// difference is non-zero only below the tangent plane). So the exact value
+/// lies in `kd_k [T_k - rem_k, T_k + rem_k + I_k max(0, R - n.(c-p))/(D - R)^3]`
+/// with `T_k` the Taylor sum; the extra term vanishes when the ball lies
+/// above the plane, which keeps the bound continuous in `p` as a node crosses
+/// it.
 ///
 /// where `o_k` is the node's per-channel first moment
 /// ([`Node::channel_offsets`]; it vanishes for members of one colour because
@@ -66,7 +73,7 @@ pub enum BoundKind {
 /// Cauchy-Schwarz, `sum_i I_ik |x_ij - c_j||x_il - c_l| <= W sqrt(S_jj S_ll)`
 /// with `S` the node's [`covariance`](Node::covariance) expressed in a frame
 /// `e1` (horizontal, towards `c`), `e2` (horizontal), `e3 = n`. In units of
-/// `D` (`rho = 1 - R/D`, `z+ = cos theta_c + R/D`, `a+ = sin theta_c + R/D`,
+/// `D` (`rho = 1 - R/D`, `z+ = |cos theta_c| + R/D`, `a+ = sin theta_c + R/D`,
 /// `b+ = R/D`, `t_a = min(1, (a+/rho)^2)`, likewise `t_b`, `t_z`,
 /// `q = z+/rho^5`) the Hessian entries are bounded over the ball by
 ///
@@ -81,7 +88,9 @@ pub enum BoundKind {
 /// remainder uses the smaller of the per-axis and the isotropic sums. At
 /// grazing angles the per-axis one is far tighter: the horizontal entries are
 /// `O(z/r^5)`. The final interval is the intersection of the paper's and the
-/// second-order one, and the estimate is clamped into it.
+/// second-order one; the estimate, the Taylor sum plus half the
+/// below-the-plane term, is clamped into it. Every piece is continuous in
+/// `p`, so the node's estimate and error are too.
 ///
 /// Rounding: cosine bounds are widened by [`COS_SLACK`]; the second-order
 /// estimate by [`SECOND_ORDER_SLACK`] of its terms' magnitudes and by
@@ -150,6 +159,22 @@ fn quadratic_form(s: &[f32; 6], e: DVec3) -> f64 {
         + 2.0 * (s[3] * e.x * e.y + s[4] * e.x * e.z + s[5] * e.y * e.z)
 }
 
+/// How far the node's box reaches below the tangent plane at the shading
+/// point: `max(0, -min over the box of n.(x - p))`, widened by the rounding
+/// of the box's `f64` support function (a few ulps of the coordinates'
+/// magnitude).
+#[inline]
+fn box_depth_below(node: &Node, surface: &Surface) -> f64 {
+    let b = node.bbox;
+    let (min, max) = (b.min.as_dvec3(), b.max.as_dvec3());
+    let centre = 0.5 * (min + max);
+    let half = 0.5 * (max - min);
+    let n = surface.normal;
+    let lowest = n.dot(centre - surface.point) - n.abs().dot(half);
+    let magnitude = centre.abs().max_element() + half.max_element() + surface.point.abs().max_element();
+    (-lowest + SECOND_ORDER_SLACK * magnitude).max(0.0)
+}
+
 /// A unit vector orthogonal to the unit vector `n`.
 #[inline]
 pub(crate) fn any_orthogonal(n: DVec3) -> DVec3 {
@@ -189,12 +214,10 @@ impl Shader for Lambert {
         let virtual_light = scale * z.max(0.0);
         let lower = scale * (cos_lo.max(0.0) * cone.far_falloff());
         let upper = scale * (cos_hi * cone.near_falloff());
-        let sd = cone.sin_half_angle;
-        if self.kind == BoundKind::Paper || !(z - sd > 4.0 * COS_SLACK) {
-            // Paper's bound only: requested, or the ball reaches the tangent
-            // plane, where f = max(0, z)/r^3 has a kink and Taylor fails.
+        if self.kind == BoundKind::Paper {
             return NodeBound::new(virtual_light, lower, upper);
         }
+        let sd = cone.sin_half_angle;
 
         // Second order, in units of D. Gradient of z/r^3 at the unit axis.
         let grad = n - 3.0 * z * cone.axis;
@@ -209,16 +232,25 @@ impl Shader for Lambert {
             DVec3::new(o[0].length() as f64, o[1].length() as f64, o[2].length() as f64)
                 * inv_d;
         let first_order = scale * offsets;
-        let estimate = virtual_light + first_order;
+        // Taylor estimate of the smooth g = z/r^3 (not clamped at 0).
+        let smooth = scale * z + first_order;
+        // f = max(0, g) exceeds g only below the tangent plane, where
+        // 0 <= f - g = -z/r^3 <= depth / (D - R)^3, depth being how far the
+        // members reach below the plane: at most R - n.(c - p) (the ball) and
+        // at most the box's depth. Zero when the box lies above the plane,
+        // and continuous as a node crosses it.
+        let depth = (sd - z).min(box_depth_below(node, surface) * inv_d).max(0.0);
+        let straddle = scale * (depth / (1.0 - sd).powi(3));
 
         // Hessian entry bounds over the ball.
         let rho = 1.0 - sd;
         let inv_rho = 1.0 / rho;
         let sin_c = n.cross(cone.axis).length();
         let t = |x: f64| (x * inv_rho).powi(2).min(1.0);
-        let (t_a, t_b, t_z) = (t(sin_c + sd), t(sd), t(z + sd));
+        let z_abs_max = z.abs() + sd;
+        let (t_a, t_b, t_z) = (t(sin_c + sd), t(sd), t(z_abs_max));
         let p4 = inv_rho.powi(4);
-        let q = (z + sd) * p4 * inv_rho;
+        let q = z_abs_max * p4 * inv_rho;
         let h11 = q * (15.0 * t_a - 3.0).max(3.0);
         let h22 = q * (15.0 * t_b - 3.0).max(3.0);
         let h33 = 9.0 * q;
@@ -254,10 +286,11 @@ impl Shader for Lambert {
         let isotropic = 3.0 * p4 * trace;
         let remainder_unit = per_axis.min(isotropic) * (1.0 + SECOND_ORDER_SLACK);
         let remainder = self.kd * (node.weight * inv_d2 * remainder_unit);
-        let rounding = SECOND_ORDER_SLACK * (virtual_light + first_order.abs())
+        let rounding = SECOND_ORDER_SLACK * (scale * z.abs() + first_order.abs() + straddle)
             + f32::EPSILON as f64 * scale * grad_len * offset_lens;
-        let lo2 = estimate - remainder - rounding;
-        let hi2 = estimate + remainder + rounding;
+        let lo2 = smooth - remainder - rounding;
+        let hi2 = smooth + remainder + straddle + rounding;
+        let estimate = smooth + 0.5 * straddle;
         let lo = lower.max(lo2);
         let hi = upper.min(hi2);
         if lo.cmpgt(hi).any() {

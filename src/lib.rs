@@ -101,6 +101,8 @@
 //!
 //! None yet: the crate depends only on `glam`, `smallvec` and `thiserror`.
 
+#![forbid(unsafe_code)]
+
 pub mod build;
 mod cut;
 mod error;

@@ -44,6 +44,8 @@ impl Aabb {
 /// * [`covariance`](Self::covariance) `S = sum_i w_i (x_i - c)(x_i - c)^T / W`,
 ///   diagonal rounded upward.
 ///
+/// * [`aabb`](Self::aabb): the tight box of the members.
+///
 /// Its lights occupy a contiguous range of the tree's leaf order; its children,
 /// if any, a contiguous range of the node array.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -55,6 +57,7 @@ pub struct Node {
     pub(crate) channel_offsets: [Vec3; 3],
     /// xx, yy, zz, xy, xz, yz
     pub(crate) covariance: [f32; 6],
+    pub(crate) bbox: Aabb,
     pub(crate) first_light: u32,
     pub(crate) light_count: u32,
     pub(crate) first_child: u32,
@@ -101,6 +104,11 @@ impl Node {
         let s = self.covariance;
         f64::from(s[0]) + f64::from(s[1]) + f64::from(s[2])
     }
+    /// Tight axis-aligned box of the member lights.
+    #[inline]
+    pub fn aabb(&self) -> Aabb {
+        self.bbox
+    }
     /// Whether the node has no children (its lights are evaluated directly).
     #[inline]
     pub fn is_leaf(&self) -> bool {
@@ -133,12 +141,10 @@ impl Node {
 /// [`LightTree::shading`]. Storage is flat: nodes in one vector (children of
 /// a node contiguous, root first), lights reordered into leaf order in
 /// another, with [`original_index`](Self::original_index) mapping back to the
-/// caller's order, and node boxes in a third vector that only visibility
-/// queries read.
+/// caller's order.
 #[derive(Clone, Debug)]
 pub struct LightTree {
     pub(crate) nodes: Vec<Node>,
-    pub(crate) boxes: Vec<Aabb>,
     pub(crate) lights: Vec<PointLight>,
     pub(crate) order: Vec<u32>,
     pub(crate) depth: u32,
@@ -177,7 +183,7 @@ impl LightTree {
     /// Tight axis-aligned box of node `index`'s lights.
     #[inline]
     pub fn node_box(&self, index: usize) -> Aabb {
-        self.boxes[index]
+        self.nodes[index].bbox
     }
 
     /// The lights in leaf order (the order node light ranges refer to).
@@ -210,11 +216,9 @@ impl LightTree {
         self.depth
     }
 
-    /// Heap memory held by the tree, in bytes (nodes, boxes, lights, index
-    /// map).
+    /// Heap memory held by the tree, in bytes (nodes, lights, index map).
     pub fn memory_bytes(&self) -> usize {
         self.nodes.capacity() * size_of::<Node>()
-            + self.boxes.capacity() * size_of::<Aabb>()
             + self.lights.capacity() * size_of::<PointLight>()
             + self.order.capacity() * size_of::<u32>()
     }

@@ -51,9 +51,6 @@ impl LightTree {
         if self.nodes.is_empty() || self.nodes[0].lights() != (0..n) {
             return Err(ValidationError::BadCover);
         }
-        if self.boxes.len() != self.nodes.len() {
-            return Err(ValidationError::BadCover);
-        }
         let mut leaf_cover = 0usize;
         for (i, node) in self.nodes.iter().enumerate() {
             let finite = node.intensity.is_finite()
@@ -98,7 +95,7 @@ impl LightTree {
             }
             let c = node.centroid.as_dvec3();
             let r = f64::from(node.radius);
-            let bbox = self.boxes[i];
+            let bbox = node.bbox;
             let mut second = [0.0f64; 3];
             for (k, l) in members.iter().enumerate() {
                 let d = l.position.as_dvec3() - c;

@@ -1,0 +1,65 @@
+//! Shading allocates nothing once a session is warmed: a counting global
+//! allocator watches the calls.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use glam::Vec3;
+use manylights::{Combined, Lambert, LightTree, Phong, PointLight, Threshold};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards every call unchanged to the system allocator; only
+// counts.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn shading_does_not_allocate_once_warmed() {
+    let lights: Vec<_> = (0..20_000)
+        .map(|i| {
+            let (x, y) = ((i % 200) as f32, (i / 200) as f32);
+            PointLight::new(Vec3::new(x, y, 5.0 + (i % 7) as f32 * 0.3), Vec3::new(1.0, 0.8, 0.6))
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut diffuse = tree.shading(Lambert::new(Vec3::splat(0.7)));
+    let mut glossy = tree.shading(Combined::new(Lambert::new(Vec3::splat(0.5)), Phong::new(Vec3::ONE, 80.0)));
+    let points: Vec<Vec3> = (0..64).map(|i| Vec3::new(i as f32 * 3.0, 100.0 - i as f32, 0.0)).collect();
+    let thresholds = [Threshold::relative(0.01), Threshold::relative(1e-4), Threshold::exact()];
+    let view = Vec3::new(0.3, 0.2, 1.0);
+    // Warm up: the error list grows to its largest size.
+    for &p in &points {
+        for &t in &thresholds {
+            diffuse.shade(p, Vec3::Z, t).unwrap();
+            glossy.shade_view(p, Vec3::Z, view, t).unwrap();
+        }
+    }
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let mut cost = 0u64;
+    for &p in &points {
+        for &t in &thresholds {
+            cost += u64::from(diffuse.shade(p, Vec3::Z, t).unwrap().cost());
+            cost += u64::from(glossy.shade_view(p, Vec3::Z, view, t).unwrap().cost());
+        }
+    }
+    let after = ALLOCATIONS.load(Ordering::Relaxed);
+    assert!(cost > 0);
+    assert_eq!(after - before, 0, "shading allocated {} times", after - before);
+}
