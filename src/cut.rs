@@ -45,6 +45,7 @@ pub struct Threshold {
     target: Target,
     max_contribution: Option<f64>,
     budget: Option<u32>,
+    band: Option<f64>,
 }
 
 impl Threshold {
@@ -54,6 +55,7 @@ impl Threshold {
             target: Target::Absolute(t),
             max_contribution: None,
             budget: None,
+            band: None,
         }
     }
 
@@ -63,6 +65,7 @@ impl Threshold {
             target: Target::Relative(t),
             max_contribution: None,
             budget: None,
+            band: None,
         }
     }
 
@@ -95,6 +98,56 @@ impl Threshold {
         self
     }
 
+    /// Interpolation across levels, so that the estimate varies
+    /// continuously with the shading point instead of jumping where the cut
+    /// changes (the seams of the paper's difference image).
+    ///
+    /// After the error list has met the target, let `tau` be the level at
+    /// which it stopped: with `h_k` the largest error left unrefined, `h_{k-1}`
+    /// the error of the last node refined, and `g_k`, `g_{k-1}` the excess of
+    /// the summed error over the target after and before that refinement
+    /// (`g_k <= 0 < g_{k-1}`), `tau = h_{k-1} + beta (h_k - h_{k-1})` with
+    /// `beta = g_{k-1} / (g_{k-1} - g_k)`. Every
+    /// unrefined node of error `e` is given a refinement weight
+    /// `alpha = clamp((e - tau/band) / (tau - tau/band), 0, 1)` and replaced
+    /// by `(1 - alpha) * (its estimate) + alpha * (its children's blended
+    /// estimates)`, recursively (children with `e >= tau` are refined fully,
+    /// as the error list would). The bound is blended the same way: a convex
+    /// combination of certified estimates of the same sum is certified by
+    /// the same combination of their bounds.
+    ///
+    /// Why this removes the seams: without it a node jumps between "used"
+    /// and "refined" where the error list's decision flips; with it, a node
+    /// is fully refined exactly when its error reaches the level `tau`, and
+    /// its weight falls continuously to 0 as its error falls to `tau/band`.
+    /// Node estimates and errors are continuous in the shading point (the
+    /// bounds are built from continuous pieces), so the blend is continuous
+    /// for a fixed `tau`. And `tau` is continuous where the stopping step
+    /// changes: as `g_{k-1}` falls to 0, `beta -> 0` and `tau -> h_{k-1}`;
+    /// on the other side the list stops one step earlier with `beta -> 1`
+    /// and the same `tau`. What remains are points where two nodes of equal
+    /// error swap their order at the last step; there `tau` moves by
+    /// `beta` times the difference of the two candidate `h_k`.
+    ///
+    /// Cost: nodes with errors within the band are refined once more
+    /// (partially). A budget caps the error list only; when it stops the cut
+    /// there is no blending. If the blended bound misses the threshold (it
+    /// can exceed the error list's when children's errors outweigh their
+    /// parent's), the unblended result is returned. `band` must be finite and
+    /// greater than 1 ([`ShadeError::InvalidBand`] otherwise). Measured on a
+    /// street-light city (`cargo run --release --example seams`), band 3
+    /// makes the largest jump of the relative error along a scanline 6 to 20
+    /// times smaller for about 1.3 times the node evaluations.
+    pub const fn with_interpolation(mut self, band: f64) -> Self {
+        self.band = Some(band);
+        self
+    }
+
+    /// The interpolation band, if interpolation is on.
+    pub const fn interpolation(&self) -> Option<f64> {
+        self.band
+    }
+
     /// The error target.
     pub const fn target(&self) -> Target {
         self.target
@@ -123,15 +176,26 @@ impl Threshold {
                 return Err(ShadeError::InvalidThreshold(m));
             }
         }
+        if let Some(b) = self.band {
+            if !(b > 1.0 && b.is_finite()) {
+                return Err(ShadeError::InvalidBand(b));
+            }
+        }
         Ok(())
     }
 
     #[inline]
     fn met(&self, estimate: DVec3, error: DVec3) -> bool {
+        self.excess(estimate, error) <= 0.0
+    }
+
+    /// How far the summed error exceeds the target (`<= 0` when met).
+    #[inline]
+    fn excess(&self, estimate: DVec3, error: DVec3) -> f64 {
         let err = error.max_element();
         match self.target {
-            Target::Absolute(t) => err <= t,
-            Target::Relative(t) => err <= t * estimate.max_element(),
+            Target::Absolute(t) => err - t,
+            Target::Relative(t) => err - t * estimate.max_element(),
         }
     }
 }
@@ -235,6 +299,7 @@ pub struct Shading<'t, S: Shader> {
     tree: &'t LightTree,
     shader: S,
     heap: BinaryHeap<Entry>,
+    blend_stack: Vec<(u32, f64, bool)>,
 }
 
 impl LightTree {
@@ -244,6 +309,7 @@ impl LightTree {
             tree: self,
             shader,
             heap: BinaryHeap::new(),
+            blend_stack: Vec::new(),
         }
     }
 }
@@ -404,46 +470,40 @@ impl<'t, S: Shader> Shading<'t, S> {
         Ok(sum.value())
     }
 
-    /// Evaluates `node` (entering the cut) and either settles it or pushes
-    /// it on the error list.
-    #[allow(clippy::too_many_arguments)]
+    /// Evaluates node `index` entering the cut with blend weight `weight`:
+    /// settles it into `call.tally.settled` (exact single lights, dark,
+    /// occluded or error-free nodes), or returns it as an unrefined entry.
     #[inline]
-    fn enter<V: Visibility>(
-        &mut self,
+    fn evaluate<V: Visibility>(
+        &self,
         index: usize,
         mut visible: bool,
-        surface: &Surface,
-        frame: &S::Frame,
-        point: Vec3,
-        threshold: &Threshold,
-        visibility: &mut V,
-        tally: &mut Tally,
-    ) {
+        weight: f64,
+        call: &mut Call<'_, S::Frame, V>,
+    ) -> Option<Entry> {
         let node: &Node = &self.tree.nodes[index];
         if node.light_count == 1 {
             let light = self.tree.lights[node.first_light as usize];
-            self.exact_light(light.position, light.intensity, visible, surface, frame, point, visibility, tally);
-            return;
+            self.exact_light(light.position, light.intensity, visible, weight, call);
+            return None;
         }
         if node.intensity == DVec3::ZERO {
             // Dark node: exactly zero whatever its geometry, even when its
             // ball holds the shading point.
-            return;
+            return None;
         }
         let mut partial = false;
         if !V::ALWAYS_VISIBLE && !visible {
-            let bounds = node_bounds(self.tree, index);
-            tally.classify += 1;
-            match visibility.classify(point, &bounds) {
-                Coverage::Occluded => return,
+            call.tally.classify += 1;
+            match call.visibility.classify(call.point, &node_bounds(self.tree, index)) {
+                Coverage::Occluded => return None,
                 Coverage::Visible => visible = true,
                 Coverage::Partial => partial = true,
             }
         }
-        tally.nodes += 1;
-        let Some(cone) = Cone::new(surface.point, node) else {
-            tally.unbounded += 1;
-            self.heap.push(Entry {
+        call.tally.nodes += 1;
+        let Some(cone) = Cone::new(call.surface.point, node) else {
+            return Some(Entry {
                 class: CLASS_UNBOUNDED,
                 key: f64::INFINITY,
                 node: index as u32,
@@ -451,13 +511,13 @@ impl<'t, S: Shader> Shading<'t, S> {
                 estimate: DVec3::ZERO,
                 error: DVec3::ZERO,
             });
-            return;
         };
-        let mut bound = self.shader.bound(frame, surface, node, &cone);
+        let mut bound = self.shader.bound(&call.frame, &call.surface, node, &cone);
         if partial {
             // Partially occluded: anything between 0 and the unoccluded upper
             // bound. The host's visible fraction only moves the estimate.
-            let estimate = match visibility.visible_fraction(point, &node_bounds(self.tree, index)) {
+            let fraction = call.visibility.visible_fraction(call.point, &node_bounds(self.tree, index));
+            let estimate = match fraction {
                 Some(f) if f.is_finite() => bound.estimate * f64::from(f.clamp(0.0, 1.0)),
                 _ => 0.5 * bound.upper,
             };
@@ -465,53 +525,72 @@ impl<'t, S: Shader> Shading<'t, S> {
         }
         let error = bound.error();
         let key = error.max_element();
-        let over = threshold
+        let over = call
             .max_contribution
             .is_some_and(|m| bound.upper.max_element() > m);
         if key <= 0.0 && !over {
             // Nothing to gain by refining (e.g. below the horizon).
-            tally.settled.add(bound.estimate);
-            return;
+            call.tally.settled.add(bound.estimate * weight);
+            return None;
         }
-        let class = if over {
-            tally.over_contribution += 1;
-            CLASS_OVER_CONTRIBUTION
-        } else {
-            CLASS_ERROR
-        };
-        tally.estimate += bound.estimate;
-        tally.error += error;
-        self.heap.push(Entry {
-            class,
+        Some(Entry {
+            class: if over { CLASS_OVER_CONTRIBUTION } else { CLASS_ERROR },
             key,
             node: index as u32,
             visible,
             estimate: bound.estimate,
             error,
-        });
+        })
     }
 
-    #[allow(clippy::too_many_arguments)]
+    /// Adds one light's exact contribution, times `weight`, asking the host
+    /// for point-to-point visibility unless the light is known visible.
     #[inline]
     fn exact_light<V: Visibility>(
         &self,
         position: Vec3,
         intensity: Vec3,
         visible: bool,
-        surface: &Surface,
-        frame: &S::Frame,
-        point: Vec3,
-        visibility: &mut V,
-        tally: &mut Tally,
+        weight: f64,
+        call: &mut Call<'_, S::Frame, V>,
     ) {
         if !V::ALWAYS_VISIBLE && !visible {
-            tally.point += 1;
-            if !visibility.visible(point, position) {
+            call.tally.point += 1;
+            if !call.visibility.visible(call.point, position) {
                 return;
             }
         }
-        tally.lights += 1;
-        tally.settled.add(self.shader.eval(frame, surface, position.as_dvec3(), intensity.as_dvec3()));
+        call.tally.lights += 1;
+        let value = self
+            .shader
+            .eval(&call.frame, &call.surface, position.as_dvec3(), intensity.as_dvec3());
+        call.tally.settled.add(value * weight);
+    }
+
+    /// Refines `node`: its lights exactly if it is a leaf, its children
+    /// otherwise, each with blend weight `weight`; children that need
+    /// refinement are passed to `pending`.
+    #[inline]
+    fn refine<V: Visibility>(
+        &self,
+        node: &Node,
+        visible: bool,
+        weight: f64,
+        call: &mut Call<'_, S::Frame, V>,
+        mut pending: impl FnMut(Entry, &mut Call<'_, S::Frame, V>),
+    ) {
+        if node.is_leaf() {
+            for k in node.lights() {
+                let l = self.tree.lights[k];
+                self.exact_light(l.position, l.intensity, visible, weight, call);
+            }
+        } else {
+            for child in node.children() {
+                if let Some(entry) = self.evaluate(child, visible, weight, call) {
+                    pending(entry, call);
+                }
+            }
+        }
     }
 
     /// Sums of the error list, recomputed from scratch (the running sums
@@ -536,27 +615,51 @@ impl<'t, S: Shader> Shading<'t, S> {
     ) -> Result<ShadeResult, ShadeError> {
         threshold.check()?;
         let surface = surface(point, normal, view)?;
-        let frame = self.shader.frame(&surface);
-        let mut tally = Tally::default();
-        self.heap.clear();
-        let mut stop = Stop::ThresholdMet;
+        let mut call = Call {
+            frame: self.shader.frame(&surface),
+            surface,
+            point,
+            max_contribution: threshold.max_contribution,
+            visibility,
+            tally: Tally::default(),
+        };
+        let mut heap = core::mem::take(&mut self.heap);
+        heap.clear();
+        // Adds an entry to the error list and the running sums.
+        let push = |heap: &mut BinaryHeap<Entry>, e: Entry, tally: &mut Tally| {
+            match e.class {
+                CLASS_UNBOUNDED => tally.unbounded += 1,
+                CLASS_OVER_CONTRIBUTION => tally.over_contribution += 1,
+                _ => {}
+            }
+            tally.estimate += e.estimate;
+            tally.error += e.error;
+            heap.push(e);
+        };
         if !self.tree.nodes.is_empty() {
-            self.enter(0, false, &surface, &frame, point, &threshold, visibility, &mut tally);
+            if let Some(root) = self.evaluate(0, false, 1.0, &mut call) {
+                push(&mut heap, root, &mut call.tally);
+            }
         }
-        let budget = threshold.budget.unwrap_or(u32::MAX);
+        let budget = threshold.budget.unwrap_or(u32::MAX).max(1);
+        let mut stop = Stop::ThresholdMet;
+        // The excess before, and the key of, the last refinement: they place
+        // the interpolation level between the last two steps.
+        let mut last_step: Option<(f64, f64)> = None;
         loop {
-            if tally.unbounded == 0
-                && tally.over_contribution == 0
-                && threshold.met(tally.settled.value() + tally.estimate, tally.error)
+            let t = &mut call.tally;
+            if t.unbounded == 0
+                && t.over_contribution == 0
+                && threshold.met(t.settled.value() + t.estimate, t.error)
             {
-                let (estimate, error) = self.heap_sums();
-                tally.estimate = estimate;
-                tally.error = error;
-                if threshold.met(tally.settled.value() + estimate, error) {
+                self.heap = heap;
+                (t.estimate, t.error) = self.heap_sums();
+                heap = core::mem::take(&mut self.heap);
+                if threshold.met(t.settled.value() + t.estimate, t.error) {
                     break;
                 }
             }
-            let Some(top) = self.heap.peek().copied() else {
+            let Some(top) = heap.peek().copied() else {
                 break;
             };
             let node = self.tree.nodes[top.node as usize];
@@ -565,52 +668,120 @@ impl<'t, S: Shader> Shading<'t, S> {
             } else {
                 node.child_count
             };
-            if tally.nodes + tally.lights + cost > budget.max(1) {
+            if t.nodes.saturating_add(t.lights).saturating_add(cost) > budget {
                 stop = Stop::Budget;
                 break;
             }
-            self.heap.pop();
+            heap.pop();
+            last_step = Some((threshold.excess(t.settled.value() + t.estimate, t.error), top.key));
             match top.class {
-                CLASS_UNBOUNDED => tally.unbounded -= 1,
-                CLASS_OVER_CONTRIBUTION => tally.over_contribution -= 1,
+                CLASS_UNBOUNDED => t.unbounded -= 1,
+                CLASS_OVER_CONTRIBUTION => t.over_contribution -= 1,
                 _ => {}
             }
-            if top.class != CLASS_UNBOUNDED {
-                tally.estimate -= top.estimate;
-                tally.error -= top.error;
-            }
-            if node.is_leaf() {
-                for k in node.lights() {
-                    let l = self.tree.lights[k];
-                    self.exact_light(l.position, l.intensity, top.visible, &surface, &frame, point, visibility, &mut tally);
+            t.estimate -= top.estimate;
+            t.error -= top.error;
+            self.refine(&node, top.visible, 1.0, &mut call, |e, call| {
+                push(&mut heap, e, &mut call.tally)
+            });
+        }
+        self.heap = heap;
+        let (estimate, error) = self.heap_sums();
+        let unbounded = call.tally.unbounded > 0;
+        let mut radiance = call.tally.settled.value() + estimate;
+        let mut error = error;
+        if let (Some(band), Stop::ThresholdMet) = (threshold.band, stop) {
+            // The level: between the last refined key (where the error list
+            // would have stopped one step earlier) and the largest key left,
+            // in proportion to where the excess crossed zero, so that it is
+            // continuous where the stopping step changes.
+            let top = self.heap.peek().map_or(0.0, |e| e.key);
+            let level = match last_step {
+                Some((before, key)) if before > 0.0 && before.is_finite() => {
+                    let after = threshold.excess(radiance, error);
+                    let beta = (before / (before - after)).clamp(0.0, 1.0);
+                    key + beta * (top - key)
                 }
-            } else {
-                for child in node.children() {
-                    self.enter(child, top.visible, &surface, &frame, point, &threshold, visibility, &mut tally);
+                _ => top,
+            };
+            if let Some((r, e)) = self.blend(level, band, &mut call) {
+                if threshold.met(r, e) {
+                    (radiance, error) = (r, e);
                 }
             }
         }
-        let (estimate, error) = self.heap_sums();
-        let radiance = tally.settled.value() + estimate;
-        // Compensated sums are within a few ulps of the sums of magnitudes:
-        // what that leaves of the estimate's rounding is within
+        // The compensated sums are within a few ulps of the sums of
+        // magnitudes: what that leaves of the estimate's rounding is within
         // ROUNDING_ALLOWANCE of the exact value (terms are non-negative); the
         // error sum's own rounding is folded in here.
-        let error_bound = if tally.unbounded > 0 {
+        let error_bound = if unbounded {
             DVec3::INFINITY
         } else {
             error * (1.0 + SUM_SLACK)
         };
+        let t = &call.tally;
         Ok(ShadeResult {
             radiance,
             error_bound,
-            nodes_evaluated: tally.nodes,
-            lights_evaluated: tally.lights,
-            classify_queries: tally.classify,
-            point_queries: tally.point,
+            nodes_evaluated: t.nodes,
+            lights_evaluated: t.lights,
+            classify_queries: t.classify,
+            point_queries: t.point,
             stop,
         })
     }
+
+    /// Interpolation across levels (see [`Threshold::with_interpolation`]):
+    /// blends every unrefined node whose error lies within `band` of the
+    /// error list's final level with its children, recursively. Returns the
+    /// blended radiance and error bound, or `None` when there is nothing to
+    /// blend. Consumes the error list.
+    fn blend<V: Visibility>(
+        &mut self,
+        level: f64,
+        band: f64,
+        call: &mut Call<'_, S::Frame, V>,
+    ) -> Option<(DVec3, DVec3)> {
+        if self.heap.is_empty() || !(level > 0.0 && level.is_finite()) {
+            return None;
+        }
+        let floor = level / band;
+        let ramp = |key: f64| ((key - floor) / (level - floor)).clamp(0.0, 1.0);
+        let mut estimate = CompensatedSum::default();
+        let mut error = CompensatedSum::default();
+        let mut stack = core::mem::take(&mut self.blend_stack);
+        stack.clear();
+        // Each pending node carries the product of the refinement weights of
+        // its ancestors; its own share (1 - alpha) keeps its virtual-light
+        // estimate and the rest (alpha) goes to its children.
+        let mut settle = |e: Entry, weight: f64, stack: &mut Vec<(u32, f64, bool)>| {
+            let alpha = if e.class == CLASS_UNBOUNDED { 1.0 } else { ramp(e.key) };
+            estimate.add(e.estimate * (weight * (1.0 - alpha)));
+            error.add(e.error * (weight * (1.0 - alpha)));
+            if alpha > 0.0 {
+                stack.push((e.node, weight * alpha, e.visible));
+            }
+        };
+        for e in self.heap.drain() {
+            settle(e, 1.0, &mut stack);
+        }
+        while let Some((index, weight, visible)) = stack.pop() {
+            let node = self.tree.nodes[index as usize];
+            self.refine(&node, visible, weight, call, |e, _| settle(e, weight, &mut stack));
+        }
+        self.blend_stack = stack;
+        Some((call.tally.settled.value() + estimate.value(), error.value()))
+    }
+}
+
+/// The state of one shading call.
+struct Call<'v, F, V> {
+    surface: Surface,
+    frame: F,
+    point: Vec3,
+    max_contribution: Option<f64>,
+    visibility: &'v mut V,
+    tally: Tally,
 }
 
 fn node_bounds(tree: &LightTree, index: usize) -> NodeBounds {

@@ -11,7 +11,8 @@
 //!   the sphere, then scaled by a length in `[0.1, 10]` (the crate
 //!   normalizes).
 //! * Thresholds: absolute `10^u` with `u` in `[-6, 3]`, relative in
-//!   `[1e-4, 0.5]`, exactly 0, infinite, and budgets of 1 to 5,000.
+//!   `[1e-4, 0.5]`, exactly 0, infinite, budgets of 1 to 5,000, and
+//!   interpolation bands of 1.1 to 8.
 #![allow(dead_code)]
 
 use glam::Vec3;
@@ -77,6 +78,9 @@ pub fn threshold() -> impl Strategy<Value = Threshold> {
         Just(Threshold::exact()),
         Just(Threshold::absolute(f64::INFINITY)),
         (1u32..=5000, 1e-4f64..=0.5).prop_map(|(b, t)| Threshold::relative(t).with_budget(b)),
+        (1e-4f64..=0.5, 1.1f64..=8.0).prop_map(|(t, band)| Threshold::relative(t).with_interpolation(band)),
+        (-6.0f64..=3.0, 1.1f64..=8.0)
+            .prop_map(|(u, band)| Threshold::absolute(10f64.powf(u)).with_interpolation(band)),
     ]
 }
 
