@@ -108,6 +108,13 @@ impl Cone {
     pub fn cos_range(&self, dir: DVec3) -> (f64, f64) {
         let cos_c = dir.dot(self.axis);
         let sin_c = dir.cross(self.axis).length();
+        self.cos_range_from(cos_c, sin_c)
+    }
+
+    /// [`cos_range`](Self::cos_range) from the cosine and sine of the angle
+    /// between the direction and the axis, for callers that need them too.
+    #[inline]
+    pub fn cos_range_from(&self, cos_c: f64, sin_c: f64) -> (f64, f64) {
         let (sd, cd) = (self.sin_half_angle, self.cos_half_angle);
         let hi = if cos_c >= cd {
             1.0

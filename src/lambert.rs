@@ -203,14 +203,16 @@ impl Shader for Lambert {
     #[inline]
     fn bound(&self, _: &(), surface: &Surface, node: &Node, cone: &Cone) -> NodeBound {
         let n = surface.normal;
-        let (cos_lo, cos_hi) = cone.cos_range(n);
+        // cos and sin of the angle between the normal and the axis.
+        let z = n.dot(cone.axis);
+        let sin_c = n.cross(cone.axis).length();
+        let (cos_lo, cos_hi) = cone.cos_range_from(z, sin_c);
         if cos_hi <= 0.0 {
             // The whole ball lies below the tangent plane.
             return NodeBound::ZERO;
         }
         let inv_d = cone.inv_distance;
         let scale = node.intensity * self.kd * (inv_d * inv_d);
-        let z = n.dot(cone.axis);
         let virtual_light = scale * z.max(0.0);
         let lower = scale * (cos_lo.max(0.0) * cone.far_falloff());
         let upper = scale * (cos_hi * cone.near_falloff());
@@ -228,9 +230,9 @@ impl Shader for Lambert {
             grad.dot(o[1].as_dvec3()),
             grad.dot(o[2].as_dvec3()),
         ) * inv_d;
-        let offset_lens =
-            DVec3::new(o[0].length() as f64, o[1].length() as f64, o[2].length() as f64)
-                * inv_d;
+        // Euclidean norms bounded by the 1-norms (no square roots).
+        let l1 = |v: Vec3| f64::from(v.abs().element_sum());
+        let offset_lens = DVec3::new(l1(o[0]), l1(o[1]), l1(o[2])) * inv_d;
         let first_order = scale * offsets;
         // Taylor estimate of the smooth g = z/r^3 (not clamped at 0).
         let smooth = scale * z + first_order;
@@ -245,25 +247,25 @@ impl Shader for Lambert {
         // Hessian entry bounds over the ball.
         let rho = 1.0 - sd;
         let inv_rho = 1.0 / rho;
-        let sin_c = n.cross(cone.axis).length();
-        let t = |x: f64| (x * inv_rho).powi(2).min(1.0);
+        // Ratios to the nearest distance, capped at 1: |a|/r, |b|/r, |z|/r.
+        let ratio = |x: f64| (x * inv_rho).min(1.0);
         let z_abs_max = z.abs() + sd;
-        let (t_a, t_b, t_z) = (t(sin_c + sd), t(sd), t(z_abs_max));
+        let (r_a, r_b, r_z) = (ratio(sin_c + sd), ratio(sd), ratio(z_abs_max));
+        let (t_a, t_b, t_z) = (r_a * r_a, r_b * r_b, r_z * r_z);
         let p4 = inv_rho.powi(4);
         let q = z_abs_max * p4 * inv_rho;
         let h11 = q * (15.0 * t_a - 3.0).max(3.0);
         let h22 = q * (15.0 * t_b - 3.0).max(3.0);
         let h33 = 9.0 * q;
-        let h12 = 15.0 * q * (t_a * t_b).sqrt().min(0.5);
+        let h12 = 15.0 * q * (r_a * r_b).min(0.5);
         let mixed_z = p4 * (15.0 * t_z - 3.0).max(3.0);
-        let h13 = t_a.sqrt() * mixed_z;
-        let h23 = t_b.sqrt() * mixed_z;
+        let h13 = r_a * mixed_z;
+        let h23 = r_b * mixed_z;
 
         // Second moments along the local frame, in units of D^2.
-        let horizontal = cone.axis - z * n;
-        let h_len = horizontal.length();
-        let e1 = if h_len > 0.0 {
-            horizontal / h_len
+        // |axis - z n| = sin_c for unit n and axis.
+        let e1 = if sin_c > 0.0 {
+            (cone.axis - z * n) / sin_c
         } else {
             any_orthogonal(n)
         };
@@ -275,14 +277,12 @@ impl Shader for Lambert {
         let s11 = (quadratic_form(cov, e1) * inv_d2).max(0.0) + pad;
         let s22 = (quadratic_form(cov, e2) * inv_d2).max(0.0) + pad;
         let s33 = (quadratic_form(cov, n) * inv_d2).max(0.0) + pad;
+        let (d1, d2, d3) = (s11.sqrt(), s22.sqrt(), s33.sqrt());
         let per_axis = 0.5
             * (h11 * s11
                 + h22 * s22
                 + h33 * s33
-                + 2.0
-                    * (h12 * (s11 * s22).sqrt()
-                        + h13 * (s11 * s33).sqrt()
-                        + h23 * (s22 * s33).sqrt()));
+                + 2.0 * (h12 * d1 * d2 + h13 * d1 * d3 + h23 * d2 * d3));
         let isotropic = 3.0 * p4 * trace;
         let remainder_unit = per_axis.min(isotropic) * (1.0 + SECOND_ORDER_SLACK);
         let remainder = self.kd * (node.weight * inv_d2 * remainder_unit);
