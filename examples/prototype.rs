@@ -31,13 +31,19 @@ fn uniform(state: &mut u64) -> f32 {
 }
 
 fn main() {
-    println!("| lights | bound | evaluations / point | max actual rel. error | time / point | exact sum / point |");
+    println!(
+        "| lights | bound | evaluations / point | max actual rel. error | time / point | exact sum / point |"
+    );
     println!("|---|---|---|---|---|---|");
     for count in [10_000usize, 100_000, 1_000_000] {
         let mut s = 0x9E37_79B9_7F4A_7C15u64;
         let lights: Vec<PointLight> = (0..count)
             .map(|_| {
-                let p = Vec3::new(uniform(&mut s) * GROUND, uniform(&mut s) * GROUND, 4.0 + 2.0 * uniform(&mut s));
+                let p = Vec3::new(
+                    uniform(&mut s) * GROUND,
+                    uniform(&mut s) * GROUND,
+                    4.0 + 2.0 * uniform(&mut s),
+                );
                 PointLight::new(p, Vec3::ONE)
             })
             .collect();
@@ -50,13 +56,18 @@ fn main() {
             let (mut cost, mut max_rel, mut time, mut exact_time) = (0u64, 0.0f64, 0.0, 0.0);
             for &p in &points {
                 let start = Instant::now();
-                let r = shading.shade(p, Vec3::Z, Threshold::relative(THRESHOLD)).expect("valid point");
+                let r = shading
+                    .shade(p, Vec3::Z, Threshold::relative(THRESHOLD))
+                    .expect("valid point");
                 time += start.elapsed().as_secs_f64();
                 let start = Instant::now();
                 let exact = shading.shade_exact(p, Vec3::Z).expect("valid point");
                 exact_time += start.elapsed().as_secs_f64();
                 let diff = (r.radiance - exact).abs();
-                assert!(diff.cmple(r.error_bound + exact * ROUNDING_ALLOWANCE).all(), "bound violated at {p}");
+                assert!(
+                    diff.cmple(r.error_bound + exact * ROUNDING_ALLOWANCE).all(),
+                    "bound violated at {p}"
+                );
                 cost += u64::from(r.cost());
                 max_rel = max_rel.max((diff / exact).max_element());
             }

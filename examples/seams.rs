@@ -69,16 +69,27 @@ struct Row {
     micros: f64,
 }
 
-fn scanline(shading: &mut Shading<'_, Lambert>, exact: &[DVec3], points: &[Vec3], t: Threshold) -> (f64, f64, f64, f64) {
+fn scanline(
+    shading: &mut Shading<'_, Lambert>,
+    exact: &[DVec3],
+    points: &[Vec3],
+    t: Threshold,
+) -> (f64, f64, f64, f64) {
     let start = Instant::now();
-    let results: Vec<_> = points.iter().map(|&p| shading.shade(p, Vec3::Z, t).unwrap()).collect();
+    let results: Vec<_> = points
+        .iter()
+        .map(|&p| shading.shade(p, Vec3::Z, t).unwrap())
+        .collect();
     let micros = start.elapsed().as_secs_f64() * 1e6 / points.len() as f64;
     let rel: Vec<f64> = results
         .iter()
         .zip(exact)
         .map(|(r, e)| ((r.radiance - *e) / *e).max_element())
         .collect();
-    let max_jump = rel.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f64::max);
+    let max_jump = rel
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .fold(0.0, f64::max);
     let max_error = rel.iter().map(|r| r.abs()).fold(0.0, f64::max);
     let mean_cost = results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / points.len() as f64;
     (max_jump, max_error, mean_cost, micros)
@@ -89,7 +100,10 @@ fn write_png(path: &Path, size: u32, rgb: &[u8]) {
     let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), size, size);
     encoder.set_color(png::ColorType::Rgb);
     encoder.set_depth(png::BitDepth::Eight);
-    encoder.write_header().and_then(|mut w| w.write_image_data(rgb)).expect("write image");
+    encoder
+        .write_header()
+        .and_then(|mut w| w.write_image_data(rgb))
+        .expect("write image");
 }
 
 fn main() {
@@ -99,7 +113,12 @@ fn main() {
     while let Some(a) = args.next() {
         match a.as_str() {
             "--out" => out = PathBuf::from(args.next().expect("--out DIR")),
-            "--band" => band = args.next().and_then(|b| b.parse().ok()).expect("--band NUMBER > 1"),
+            "--band" => {
+                band = args
+                    .next()
+                    .and_then(|b| b.parse().ok())
+                    .expect("--band NUMBER > 1")
+            }
             other => panic!("unknown argument {other}"),
         }
     }
@@ -113,7 +132,10 @@ fn main() {
     let points: Vec<Vec3> = (0..SCANLINE_POINTS)
         .map(|i| a.lerp(b, i as f32 / (SCANLINE_POINTS - 1) as f32))
         .collect();
-    let exact: Vec<DVec3> = points.par_iter().map(|&p| shading_exact(&tree, p)).collect();
+    let exact: Vec<DVec3> = points
+        .par_iter()
+        .map(|&p| shading_exact(&tree, p))
+        .collect();
 
     let mut rows = Vec::new();
     for &t in &THRESHOLDS {
@@ -122,12 +144,26 @@ fn main() {
             if interpolated {
                 th = th.with_interpolation(band);
             }
-            let (max_jump, max_error, mean_cost, micros) = scanline(&mut shading, &exact, &points, th);
-            rows.push(Row { threshold: t, interpolated, max_jump, max_error, mean_cost, micros });
+            let (max_jump, max_error, mean_cost, micros) =
+                scanline(&mut shading, &exact, &points, th);
+            rows.push(Row {
+                threshold: t,
+                interpolated,
+                max_jump,
+                max_error,
+                mean_cost,
+                micros,
+            });
         }
     }
-    println!("{} lights, {} points along a scanline, band {band}\n", lights.len(), SCANLINE_POINTS);
-    println!("| threshold | interpolation | largest jump of rel. error | max rel. error | cost / point | time / point |");
+    println!(
+        "{} lights, {} points along a scanline, band {band}\n",
+        lights.len(),
+        SCANLINE_POINTS
+    );
+    println!(
+        "| threshold | interpolation | largest jump of rel. error | max rel. error | cost / point | time / point |"
+    );
     println!("|---|---|---|---|---|---|");
     for r in &rows {
         println!(
@@ -161,13 +197,27 @@ fn main() {
             origin + Vec3::new(x, y, 0.0) * (span / IMAGE_SIZE as f32)
         })
         .collect();
-    let exact_img: Vec<DVec3> = pixels.par_iter().map(|&p| shading_exact(&tree, p)).collect();
-    let exposure = 1.0 / exact_img.iter().map(|e| e.max_element()).fold(0.0, f64::max);
+    let exact_img: Vec<DVec3> = pixels
+        .par_iter()
+        .map(|&p| shading_exact(&tree, p))
+        .collect();
+    let exposure = 1.0
+        / exact_img
+            .iter()
+            .map(|e| e.max_element())
+            .fold(0.0, f64::max);
     let tone = |v: DVec3| -> [u8; 3] {
-        let c = (v * exposure).clamp(DVec3::ZERO, DVec3::ONE).powf(1.0 / 2.2) * 255.0;
+        let c = (v * exposure)
+            .clamp(DVec3::ZERO, DVec3::ONE)
+            .powf(1.0 / 2.2)
+            * 255.0;
         [c.x as u8, c.y as u8, c.z as u8]
     };
-    write_png(&out.join("seams_exact.png"), IMAGE_SIZE, &exact_img.iter().flat_map(|&v| tone(v)).collect::<Vec<_>>());
+    write_png(
+        &out.join("seams_exact.png"),
+        IMAGE_SIZE,
+        &exact_img.iter().flat_map(|&v| tone(v)).collect::<Vec<_>>(),
+    );
     for interpolated in [false, true] {
         let mut th = Threshold::relative(IMAGE_THRESHOLD);
         if interpolated {
@@ -175,9 +225,16 @@ fn main() {
         }
         let img: Vec<DVec3> = pixels
             .par_iter()
-            .map_init(|| tree.shading(Lambert::new(Vec3::splat(0.7))), |s, &p| s.shade(p, Vec3::Z, th).unwrap().radiance)
+            .map_init(
+                || tree.shading(Lambert::new(Vec3::splat(0.7))),
+                |s, &p| s.shade(p, Vec3::Z, th).unwrap().radiance,
+            )
             .collect();
-        let name = if interpolated { "interpolated" } else { "discrete" };
+        let name = if interpolated {
+            "interpolated"
+        } else {
+            "discrete"
+        };
         let render: Vec<u8> = img.iter().flat_map(|&v| tone(v)).collect();
         write_png(&out.join(format!("seams_{name}.png")), IMAGE_SIZE, &render);
         // Enhanced contrast: |relative error| / DIFF_FULL_SCALE.
@@ -189,7 +246,11 @@ fn main() {
                 [g as u8; 3]
             })
             .collect();
-        write_png(&out.join(format!("seams_{name}_diff.png")), IMAGE_SIZE, &diff);
+        write_png(
+            &out.join(format!("seams_{name}_diff.png")),
+            IMAGE_SIZE,
+            &diff,
+        );
     }
     println!(
         "\nimages ({}x{}, threshold {:.0}%, difference: white = {:.0}% relative error): {}/seams_{{exact,discrete,interpolated,discrete_diff,interpolated_diff}}.png",
@@ -202,5 +263,7 @@ fn main() {
 }
 
 fn shading_exact(tree: &LightTree, p: Vec3) -> DVec3 {
-    tree.shading(Lambert::new(Vec3::splat(0.7))).shade_exact(p, Vec3::Z).unwrap()
+    tree.shading(Lambert::new(Vec3::splat(0.7)))
+        .shade_exact(p, Vec3::Z)
+        .unwrap()
 }

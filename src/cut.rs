@@ -6,11 +6,11 @@ use std::collections::BinaryHeap;
 
 use glam::{DVec3, Vec3};
 
+use crate::ShadeError;
 use crate::geometry::{Cone, Surface};
 use crate::shader::{NodeBound, Shader, ViewIndependent};
 use crate::tree::{LightTree, Node};
 use crate::visibility::{Coverage, NodeBounds, Unoccluded, Visibility};
-use crate::ShadeError;
 
 /// What the summed error bound is compared with.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -171,15 +171,15 @@ impl Threshold {
         if !(t >= 0.0) {
             return Err(ShadeError::InvalidThreshold(t));
         }
-        if let Some(m) = self.max_contribution {
-            if !(m >= 0.0) {
-                return Err(ShadeError::InvalidThreshold(m));
-            }
+        if let Some(m) = self.max_contribution
+            && !(m >= 0.0)
+        {
+            return Err(ShadeError::InvalidThreshold(m));
         }
-        if let Some(b) = self.band {
-            if !(b > 1.0 && b.is_finite()) {
-                return Err(ShadeError::InvalidBand(b));
-            }
+        if let Some(b) = self.band
+            && !(b > 1.0 && b.is_finite())
+        {
+            return Err(ShadeError::InvalidBand(b));
         }
         Ok(())
     }
@@ -495,7 +495,10 @@ impl<'t, S: Shader> Shading<'t, S> {
         let mut partial = false;
         if !V::ALWAYS_VISIBLE && !visible {
             call.tally.classify += 1;
-            match call.visibility.classify(call.point, &node_bounds(self.tree, index)) {
+            match call
+                .visibility
+                .classify(call.point, &node_bounds(self.tree, index))
+            {
                 Coverage::Occluded => return None,
                 Coverage::Visible => visible = true,
                 Coverage::Partial => partial = true,
@@ -516,7 +519,9 @@ impl<'t, S: Shader> Shading<'t, S> {
         if partial {
             // Partially occluded: anything between 0 and the unoccluded upper
             // bound. The host's visible fraction only moves the estimate.
-            let fraction = call.visibility.visible_fraction(call.point, &node_bounds(self.tree, index));
+            let fraction = call
+                .visibility
+                .visible_fraction(call.point, &node_bounds(self.tree, index));
             let estimate = match fraction {
                 Some(f) if f.is_finite() => bound.estimate * f64::from(f.clamp(0.0, 1.0)),
                 _ => 0.5 * bound.upper,
@@ -534,7 +539,11 @@ impl<'t, S: Shader> Shading<'t, S> {
             return None;
         }
         Some(Entry {
-            class: if over { CLASS_OVER_CONTRIBUTION } else { CLASS_ERROR },
+            class: if over {
+                CLASS_OVER_CONTRIBUTION
+            } else {
+                CLASS_ERROR
+            },
             key,
             node: index as u32,
             visible,
@@ -561,9 +570,12 @@ impl<'t, S: Shader> Shading<'t, S> {
             }
         }
         call.tally.lights += 1;
-        let value = self
-            .shader
-            .eval(&call.frame, &call.surface, position.as_dvec3(), intensity.as_dvec3());
+        let value = self.shader.eval(
+            &call.frame,
+            &call.surface,
+            position.as_dvec3(),
+            intensity.as_dvec3(),
+        );
         call.tally.settled.add(value * weight);
     }
 
@@ -636,10 +648,10 @@ impl<'t, S: Shader> Shading<'t, S> {
             tally.error += e.error;
             heap.push(e);
         };
-        if !self.tree.nodes.is_empty() {
-            if let Some(root) = self.evaluate(0, false, 1.0, &mut call) {
-                push(&mut heap, root, &mut call.tally);
-            }
+        if !self.tree.nodes.is_empty()
+            && let Some(root) = self.evaluate(0, false, 1.0, &mut call)
+        {
+            push(&mut heap, root, &mut call.tally);
         }
         let budget = threshold.budget.unwrap_or(u32::MAX).max(1);
         let mut stop = Stop::ThresholdMet;
@@ -673,7 +685,10 @@ impl<'t, S: Shader> Shading<'t, S> {
                 break;
             }
             heap.pop();
-            last_step = Some((threshold.excess(t.settled.value() + t.estimate, t.error), top.key));
+            last_step = Some((
+                threshold.excess(t.settled.value() + t.estimate, t.error),
+                top.key,
+            ));
             match top.class {
                 CLASS_UNBOUNDED => t.unbounded -= 1,
                 CLASS_OVER_CONTRIBUTION => t.over_contribution -= 1,
@@ -704,10 +719,10 @@ impl<'t, S: Shader> Shading<'t, S> {
                 }
                 _ => top,
             };
-            if let Some((r, e)) = self.blend(level, band, &mut call) {
-                if threshold.met(r, e) {
-                    (radiance, error) = (r, e);
-                }
+            if let Some((r, e)) = self.blend(level, band, &mut call)
+                && threshold.met(r, e)
+            {
+                (radiance, error) = (r, e);
             }
         }
         // The compensated sums are within a few ulps of the sums of
@@ -755,7 +770,11 @@ impl<'t, S: Shader> Shading<'t, S> {
         // its ancestors; its own share (1 - alpha) keeps its virtual-light
         // estimate and the rest (alpha) goes to its children.
         let mut settle = |e: Entry, weight: f64, stack: &mut Vec<(u32, f64, bool)>| {
-            let alpha = if e.class == CLASS_UNBOUNDED { 1.0 } else { ramp(e.key) };
+            let alpha = if e.class == CLASS_UNBOUNDED {
+                1.0
+            } else {
+                ramp(e.key)
+            };
             estimate.add(e.estimate * (weight * (1.0 - alpha)));
             error.add(e.error * (weight * (1.0 - alpha)));
             if alpha > 0.0 {
@@ -767,7 +786,9 @@ impl<'t, S: Shader> Shading<'t, S> {
         }
         while let Some((index, weight, visible)) = stack.pop() {
             let node = self.tree.nodes[index as usize];
-            self.refine(&node, visible, weight, call, |e, _| settle(e, weight, &mut stack));
+            self.refine(&node, visible, weight, call, |e, _| {
+                settle(e, weight, &mut stack)
+            });
         }
         self.blend_stack = stack;
         Some((call.tally.settled.value() + estimate.value(), error.value()))

@@ -171,7 +171,8 @@ fn box_depth_below(node: &Node, surface: &Surface) -> f64 {
     let half = 0.5 * (max - min);
     let n = surface.normal;
     let lowest = n.dot(centre - surface.point) - n.abs().dot(half);
-    let magnitude = centre.abs().max_element() + half.max_element() + surface.point.abs().max_element();
+    let magnitude =
+        centre.abs().max_element() + half.max_element() + surface.point.abs().max_element();
     (-lowest + SECOND_ORDER_SLACK * magnitude).max(0.0)
 }
 
@@ -241,7 +242,9 @@ impl Shader for Lambert {
         // members reach below the plane: at most R - n.(c - p) (the ball) and
         // at most the box's depth. Zero when the box lies above the plane,
         // and continuous as a node crosses it.
-        let depth = (sd - z).min(box_depth_below(node, surface) * inv_d).max(0.0);
+        let depth = (sd - z)
+            .min(box_depth_below(node, surface) * inv_d)
+            .max(0.0);
         let straddle = scale * (depth / (1.0 - sd).powi(3));
 
         // Hessian entry bounds over the ball.

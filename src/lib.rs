@@ -126,6 +126,11 @@ pub use shader::{Combined, NodeBound, Shader, ViewIndependent};
 pub use tree::{Aabb, LightTree, Node};
 pub use visibility::{Coverage, NodeBounds, Unoccluded, Visibility};
 
+// The README's code blocks are compiled and run as doc tests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;
+
 /// Largest supported magnitude of a light coordinate. It keeps squared
 /// distances between lights (at most `(2e18)^2 * 3 = 1.2e37`) within `f32`,
 /// where node second moments are stored.

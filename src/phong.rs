@@ -112,7 +112,13 @@ impl Phong {
         if lobe >= LOBE_LOG_SPACE_BELOW {
             return scale * lobe;
         }
-        let f = |s: f64| if s > 0.0 { (log_lobe + s.ln()).exp() } else { 0.0 };
+        let f = |s: f64| {
+            if s > 0.0 {
+                (log_lobe + s.ln()).exp()
+            } else {
+                0.0
+            }
+        };
         DVec3::new(f(scale.x), f(scale.y), f(scale.z))
     }
 }

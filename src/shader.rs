@@ -92,8 +92,7 @@ pub trait Shader {
     ) -> DVec3;
 
     /// Certified bound for all lights of `node`, seen under `cone`.
-    fn bound(&self, frame: &Self::Frame, surface: &Surface, node: &Node, cone: &Cone)
-    -> NodeBound;
+    fn bound(&self, frame: &Self::Frame, surface: &Surface, node: &Node, cone: &Cone) -> NodeBound;
 }
 
 /// Marker for shaders whose result does not depend on the view direction
@@ -141,13 +140,7 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
     }
 
     #[inline]
-    fn bound(
-        &self,
-        frame: &Self::Frame,
-        surface: &Surface,
-        node: &Node,
-        cone: &Cone,
-    ) -> NodeBound {
+    fn bound(&self, frame: &Self::Frame, surface: &Surface, node: &Node, cone: &Cone) -> NodeBound {
         let a = self.first.bound(&frame.0, surface, node, cone);
         let b = self.second.bound(&frame.1, surface, node, cone);
         NodeBound {

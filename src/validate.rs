@@ -2,8 +2,8 @@
 
 use glam::DVec3;
 
-use crate::tree::LightTree;
 use crate::ValidationError;
+use crate::tree::LightTree;
 
 /// Relative tolerance when comparing a node's stored intensity with the sum
 /// of its children's: both are `f64` sums of the same `f32` values in
@@ -69,7 +69,10 @@ impl LightTree {
             let members = &self.lights[range.clone()];
             let sum = if node.is_leaf() {
                 leaf_cover += range.len();
-                members.iter().map(|l| l.intensity.as_dvec3()).sum::<DVec3>()
+                members
+                    .iter()
+                    .map(|l| l.intensity.as_dvec3())
+                    .sum::<DVec3>()
             } else {
                 let children = node.children();
                 if children.start <= i || children.end > self.nodes.len() {
@@ -111,9 +114,8 @@ impl LightTree {
                 second[2] += w * d.z * d.z;
             }
             if node.weight > 0.0 {
-                for axis in 0..3 {
-                    let stored = f64::from(node.covariance[axis]) * node.weight;
-                    if second[axis] > stored * (1.0 + SUM_TOLERANCE) {
+                for (member, stored) in second.iter().zip(node.covariance) {
+                    if *member > f64::from(stored) * node.weight * (1.0 + SUM_TOLERANCE) {
                         return Err(ValidationError::MomentMismatch { node: i });
                     }
                 }

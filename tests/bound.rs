@@ -6,17 +6,23 @@ mod common;
 use common::*;
 use glam::Vec3;
 use manylights::{
-    BoundKind, Combined, Cone, Lambert, LightTree, Phong, ROUNDING_ALLOWANCE, Shader, Shading, Stop,
-    Threshold,
+    BoundKind, Combined, Cone, Lambert, LightTree, Phong, ROUNDING_ALLOWANCE, Shader, Shading,
+    Stop, Threshold,
 };
 use proptest::prelude::*;
 
 /// Phong exponents the issue names, all property-tested.
 const EXPONENTS: [f32; 6] = [0.0, 1.0, 10.0, 100.0, 1e4, 1e6];
 
+/// 96 cases per property in CI; `PROPTEST_CASES=N` overrides it for long
+/// runs.
 fn config() -> ProptestConfig {
+    let cases = std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(96);
     ProptestConfig {
-        cases: 96,
+        cases,
         ..ProptestConfig::default()
     }
 }
@@ -55,7 +61,10 @@ fn check_point<S: Shader>(
     // no finite bound and must be refined whatever the threshold).
     let root = shading.tree().root().unwrap();
     if root.light_count() == 1 || Cone::new(point.as_dvec3(), root).is_some() {
-        prop_assert!(inf.nodes_evaluated + inf.lights_evaluated <= 1, "infinite threshold refined: {inf:?}");
+        prop_assert!(
+            inf.nodes_evaluated + inf.lights_evaluated <= 1,
+            "infinite threshold refined: {inf:?}"
+        );
     }
     Ok(())
 }

@@ -34,7 +34,10 @@ fn scan(threshold: Threshold) -> (f64, f64) {
         let r = s.shade(p, Vec3::Z, threshold).unwrap();
         let exact = s.shade_exact(p, Vec3::Z).unwrap();
         for k in 0..3 {
-            assert!((r.radiance[k] - exact[k]).abs() <= r.error_bound[k] + ROUNDING_ALLOWANCE * exact[k]);
+            assert!(
+                (r.radiance[k] - exact[k]).abs()
+                    <= r.error_bound[k] + ROUNDING_ALLOWANCE * exact[k]
+            );
         }
         let rel = ((r.radiance - exact) / exact).max_element();
         if let Some(prev) = previous {
@@ -55,7 +58,10 @@ fn interpolation_shrinks_jumps_along_a_scanline() {
             smooth * 4.0 <= discrete,
             "threshold {t}: largest jump {smooth:e} with interpolation vs {discrete:e} without"
         );
-        assert!(smooth_cost <= 1.6 * discrete_cost, "cost {smooth_cost} vs {discrete_cost}");
+        assert!(
+            smooth_cost <= 1.6 * discrete_cost,
+            "cost {smooth_cost} vs {discrete_cost}"
+        );
     }
 }
 
@@ -65,7 +71,13 @@ fn interpolation_keeps_the_threshold() {
     let mut s = tree.shading(Lambert::new(Vec3::splat(0.7)));
     for i in 0..200 {
         let p = Vec3::new(3.0 + i as f32 * 0.9, 50.0 + (i % 7) as f32, 0.0);
-        let r = s.shade(p, Vec3::Z, Threshold::relative(0.02).with_interpolation(3.0)).unwrap();
+        let r = s
+            .shade(
+                p,
+                Vec3::Z,
+                Threshold::relative(0.02).with_interpolation(3.0),
+            )
+            .unwrap();
         assert!(r.error_bound.max_element() <= 0.02 * r.radiance.max_element() * (1.0 + 1e-12));
         assert_ne!(r.radiance, DVec3::ZERO);
     }
@@ -77,7 +89,11 @@ fn bad_bands_are_refused() {
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     for band in [1.0, 0.5, -2.0, f64::NAN, f64::INFINITY] {
         assert!(matches!(
-            s.shade(Vec3::ZERO, Vec3::Z, Threshold::relative(0.01).with_interpolation(band)),
+            s.shade(
+                Vec3::ZERO,
+                Vec3::Z,
+                Threshold::relative(0.01).with_interpolation(band)
+            ),
             Err(ShadeError::InvalidBand(_))
         ));
     }

@@ -35,14 +35,26 @@ fn shading_does_not_allocate_once_warmed() {
     let lights: Vec<_> = (0..20_000)
         .map(|i| {
             let (x, y) = ((i % 200) as f32, (i / 200) as f32);
-            PointLight::new(Vec3::new(x, y, 5.0 + (i % 7) as f32 * 0.3), Vec3::new(1.0, 0.8, 0.6))
+            PointLight::new(
+                Vec3::new(x, y, 5.0 + (i % 7) as f32 * 0.3),
+                Vec3::new(1.0, 0.8, 0.6),
+            )
         })
         .collect();
     let tree = LightTree::build(&lights).unwrap();
     let mut diffuse = tree.shading(Lambert::new(Vec3::splat(0.7)));
-    let mut glossy = tree.shading(Combined::new(Lambert::new(Vec3::splat(0.5)), Phong::new(Vec3::ONE, 80.0)));
-    let points: Vec<Vec3> = (0..64).map(|i| Vec3::new(i as f32 * 3.0, 100.0 - i as f32, 0.0)).collect();
-    let thresholds = [Threshold::relative(0.01), Threshold::relative(1e-4), Threshold::exact()];
+    let mut glossy = tree.shading(Combined::new(
+        Lambert::new(Vec3::splat(0.5)),
+        Phong::new(Vec3::ONE, 80.0),
+    ));
+    let points: Vec<Vec3> = (0..64)
+        .map(|i| Vec3::new(i as f32 * 3.0, 100.0 - i as f32, 0.0))
+        .collect();
+    let thresholds = [
+        Threshold::relative(0.01),
+        Threshold::relative(1e-4),
+        Threshold::exact(),
+    ];
     let view = Vec3::new(0.3, 0.2, 1.0);
     // Warm up: the error list grows to its largest size.
     for &p in &points {
@@ -61,5 +73,10 @@ fn shading_does_not_allocate_once_warmed() {
     }
     let after = ALLOCATIONS.load(Ordering::Relaxed);
     assert!(cost > 0);
-    assert_eq!(after - before, 0, "shading allocated {} times", after - before);
+    assert_eq!(
+        after - before,
+        0,
+        "shading allocated {} times",
+        after - before
+    );
 }

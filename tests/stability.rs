@@ -28,10 +28,17 @@ const EXPONENTS: [f32; 4] = [0.0, 1.0, 100.0, 1e6];
 
 fn assert_contract(what: &str, r: &ShadeResult, exact: DVec3) {
     assert!(exact.is_finite(), "{what}: exact {exact} not finite");
-    assert!(r.radiance.is_finite(), "{what}: radiance {} not finite", r.radiance);
+    assert!(
+        r.radiance.is_finite(),
+        "{what}: radiance {} not finite",
+        r.radiance
+    );
     assert!(!r.error_bound.is_nan(), "{what}: bound is NaN");
     if r.stop == Stop::ThresholdMet {
-        assert!(r.error_bound.is_finite(), "{what}: met with an infinite bound");
+        assert!(
+            r.error_bound.is_finite(),
+            "{what}: met with an infinite bound"
+        );
     }
     for k in 0..3 {
         let diff = (r.radiance[k] - exact[k]).abs();
@@ -67,7 +74,10 @@ fn check_all(lights: &[PointLight], p: Vec3, n: Vec3, v: Vec3) -> DVec3 {
             let r = s.shade_view(p, n, v, t).unwrap();
             assert_contract(&format!("phong e={e} {t:?}"), &r, exact);
         }
-        let mut s = tree.shading(Combined::new(Lambert::new(Vec3::ONE), Phong::new(Vec3::ONE, e)));
+        let mut s = tree.shading(Combined::new(
+            Lambert::new(Vec3::ONE),
+            Phong::new(Vec3::ONE, e),
+        ));
         let exact = s.shade_exact_view(p, n, v).unwrap();
         for t in thresholds() {
             let r = s.shade_view(p, n, v, t).unwrap();
@@ -115,16 +125,26 @@ fn point_exactly_on_a_light() {
 fn point_inside_a_node_ball_not_on_a_light() {
     // A dense cluster around the origin: the point sits between lights.
     let lights = random_lights(2000, 0.5, 2);
-    check_all(&lights, Vec3::new(0.01, -0.02, 0.003), Vec3::new(0.2, 0.1, 1.0), VIEW);
+    check_all(
+        &lights,
+        Vec3::new(0.01, -0.02, 0.003),
+        Vec3::new(0.2, 0.1, 1.0),
+        VIEW,
+    );
 }
 
 #[test]
 fn hundred_thousand_coincident_lights() {
-    let lights = vec![PointLight::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 0.5, 0.25)); 100_000];
+    let lights =
+        vec![PointLight::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 0.5, 0.25)); 100_000];
     let tree = LightTree::build(&lights).unwrap();
     assert_eq!(tree.nodes().len(), 1, "coincident lights make one leaf");
     // Seen from afar, from next to them, and from on top of them.
-    for p in [Vec3::ZERO, Vec3::new(1.0, 2.0, 2.999), Vec3::new(1.0, 2.0, 3.0)] {
+    for p in [
+        Vec3::ZERO,
+        Vec3::new(1.0, 2.0, 2.999),
+        Vec3::new(1.0, 2.0, 3.0),
+    ] {
         check_all(&lights, p, Vec3::Z, VIEW);
     }
 }
@@ -156,7 +176,12 @@ fn collinear_lights() {
 fn coplanar_lights() {
     let mut rng = Rng(4);
     let lights: Vec<_> = (0..5000)
-        .map(|_| PointLight::new(Vec3::new(rng.next() * 10.0, rng.next() * 10.0, 5.0), Vec3::ONE))
+        .map(|_| {
+            PointLight::new(
+                Vec3::new(rng.next() * 10.0, rng.next() * 10.0, 5.0),
+                Vec3::ONE,
+            )
+        })
         .collect();
     check_all(&lights, Vec3::new(5.0, 5.0, 0.0), Vec3::Z, VIEW);
     // A point in the lights' own plane, normal in the plane.
@@ -168,7 +193,12 @@ fn lights_exactly_in_the_tangent_plane() {
     // cos = 0 exactly for every light: the diffuse sum is exactly 0.
     let mut rng = Rng(5);
     let lights: Vec<_> = (0..3000)
-        .map(|_| PointLight::new(Vec3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, 0.0), Vec3::ONE))
+        .map(|_| {
+            PointLight::new(
+                Vec3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, 0.0),
+                Vec3::ONE,
+            )
+        })
         .collect();
     let exact = check_all(&lights, Vec3::ZERO, Vec3::Z, VIEW);
     assert_eq!(exact, DVec3::ZERO);
@@ -179,7 +209,12 @@ fn grazing_normals() {
     let lights = random_lights(3000, 5.0, 6);
     for tilt in [1e-3f32, 1e-6, 1e-7] {
         // The normal almost in the plane the lights' centre lies in.
-        check_all(&lights, Vec3::new(0.0, 0.0, -20.0), Vec3::new(1.0, 0.0, tilt), VIEW);
+        check_all(
+            &lights,
+            Vec3::new(0.0, 0.0, -20.0),
+            Vec3::new(1.0, 0.0, tilt),
+            VIEW,
+        );
     }
 }
 
@@ -197,7 +232,12 @@ fn grazing_views() {
 fn view_below_the_surface() {
     // n.v < 0 is shaded by the formula as written (documented on Phong).
     let lights = random_lights(2000, 5.0, 8);
-    check_all(&lights, Vec3::new(0.0, 0.0, 6.0), Vec3::Z, Vec3::new(0.2, 0.1, -1.0));
+    check_all(
+        &lights,
+        Vec3::new(0.0, 0.0, 6.0),
+        Vec3::Z,
+        Vec3::new(0.2, 0.1, -1.0),
+    );
 }
 
 #[test]
@@ -206,7 +246,10 @@ fn intensities_from_1e_minus_30_to_1e30() {
     let lights: Vec<_> = (0..4000)
         .map(|i| {
             let decade = (i % 61) as f32 - 30.0;
-            PointLight::new(rng.in_cube(5.0), Vec3::new(1.0, rng.next(), 0.5) * 10f32.powf(decade))
+            PointLight::new(
+                rng.in_cube(5.0),
+                Vec3::new(1.0, rng.next(), 0.5) * 10f32.powf(decade),
+            )
         })
         .collect();
     check_all(&lights, Vec3::new(0.0, 0.0, -6.0), Vec3::Z, VIEW);
@@ -222,7 +265,10 @@ fn all_intensities_zero() {
     let exact = check_all(&lights, Vec3::new(0.0, 0.0, -6.0), Vec3::Z, VIEW);
     assert_eq!(exact, DVec3::ZERO);
     let tree = LightTree::build(&lights).unwrap();
-    let r = tree.shading(Lambert::new(Vec3::ONE)).shade(Vec3::new(0.0, 0.0, -6.0), Vec3::Z, Threshold::exact()).unwrap();
+    let r = tree
+        .shading(Lambert::new(Vec3::ONE))
+        .shade(Vec3::new(0.0, 0.0, -6.0), Vec3::Z, Threshold::exact())
+        .unwrap();
     assert_eq!((r.radiance, r.error_bound), (DVec3::ZERO, DVec3::ZERO));
     assert_eq!(r.cost(), 0, "a dark root is settled without a bound");
 }
@@ -245,16 +291,25 @@ fn zero_lights() {
     let tree = LightTree::build(&[]).unwrap();
     tree.validate().unwrap();
     assert!(tree.is_empty() && tree.root().is_none());
-    let mut s = tree.shading(Combined::new(Lambert::new(Vec3::ONE), Phong::new(Vec3::ONE, 10.0)));
+    let mut s = tree.shading(Combined::new(
+        Lambert::new(Vec3::ONE),
+        Phong::new(Vec3::ONE, 10.0),
+    ));
     for t in thresholds() {
         let r = s.shade_view(Vec3::ZERO, Vec3::Z, VIEW, t).unwrap();
-        assert_eq!((r.radiance, r.error_bound, r.cost()), (DVec3::ZERO, DVec3::ZERO, 0));
+        assert_eq!(
+            (r.radiance, r.error_bound, r.cost()),
+            (DVec3::ZERO, DVec3::ZERO, 0)
+        );
     }
 }
 
 #[test]
 fn one_light() {
-    let lights = [PointLight::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0))];
+    let lights = [PointLight::new(
+        Vec3::new(1.0, 2.0, 3.0),
+        Vec3::new(4.0, 5.0, 6.0),
+    )];
     let exact = check_all(&lights, Vec3::ZERO, Vec3::Z, VIEW);
     let expected = DVec3::new(0.9, 0.5, 0.2) * DVec3::new(4.0, 5.0, 6.0) * 3.0 / 14f64.powf(1.5);
     assert!((exact - expected).abs().max_element() <= 1e-7 * expected.max_element());
@@ -295,7 +350,10 @@ fn lattice_scene() -> Vec<PointLight> {
 /// and the exact value, both multiplied by `s^2`.
 fn shade_scaled(lights: &[PointLight], s: f32) -> (ShadeResult, DVec3) {
     let (p, n) = (Vec3::new(1.0, -2.0, 0.0), Vec3::new(0.1, 0.0, 1.0));
-    let scaled: Vec<_> = lights.iter().map(|l| PointLight::new(l.position * s, l.intensity)).collect();
+    let scaled: Vec<_> = lights
+        .iter()
+        .map(|l| PointLight::new(l.position * s, l.intensity))
+        .collect();
     let tree = LightTree::build(&scaled).unwrap();
     let mut sh = tree.shading(Lambert::new(Vec3::ONE));
     let mut r = sh.shade(p * s, n, Threshold::relative(0.01)).unwrap();
@@ -321,9 +379,23 @@ fn rescaled_scene_scales_exactly_for_powers_of_two() {
         let (r, e) = shade_scaled(&lights, s);
         let close = |a: DVec3, b: DVec3| (a - b).abs().max_element() <= 1e-12 * b.max_element();
         assert!(close(e, e1), "s={s}: exact {e} vs {e1}");
-        assert_eq!((r.nodes_evaluated, r.lights_evaluated), (r1.nodes_evaluated, r1.lights_evaluated), "s={s}");
-        assert!(close(r.radiance, r1.radiance), "s={s}: estimate {} vs {}", r.radiance, r1.radiance);
-        assert!(close(r.error_bound, r1.error_bound), "s={s}: bound {} vs {}", r.error_bound, r1.error_bound);
+        assert_eq!(
+            (r.nodes_evaluated, r.lights_evaluated),
+            (r1.nodes_evaluated, r1.lights_evaluated),
+            "s={s}"
+        );
+        assert!(
+            close(r.radiance, r1.radiance),
+            "s={s}: estimate {} vs {}",
+            r.radiance,
+            r1.radiance
+        );
+        assert!(
+            close(r.error_bound, r1.error_bound),
+            "s={s}: bound {} vs {}",
+            r.error_bound,
+            r1.error_bound
+        );
     }
 }
 
@@ -338,10 +410,16 @@ fn rescaled_scene_scales_as_the_model() {
     for s in [1e-6f32, 1e-3, 1e3, 1e6] {
         let (r, e) = shade_scaled(&lights, s);
         // A few f32 roundings of each coordinate, through 1/d^2.
-        assert!((e - e1).abs().max_element() <= 1e-6 * e1.max_element(), "s={s}: exact {e} vs {e1}");
+        assert!(
+            (e - e1).abs().max_element() <= 1e-6 * e1.max_element(),
+            "s={s}: exact {e} vs {e1}"
+        );
         for k in 0..3 {
             let gap = (r.radiance[k] - r1.radiance[k]).abs();
-            assert!(gap <= r.error_bound[k] + r1.error_bound[k], "s={s}: estimates disagree beyond their bounds");
+            assert!(
+                gap <= r.error_bound[k] + r1.error_bound[k],
+                "s={s}: estimates disagree beyond their bounds"
+            );
             let ratio = r.error_bound[k] / r1.error_bound[k];
             assert!((0.9..=1.1).contains(&ratio), "s={s}: bound ratio {ratio}");
         }
@@ -359,7 +437,11 @@ fn phong_exponent_zero_and_1e6() {
         let p = Vec3::new(0.0, 0.0, -7.0);
         let exact = s.shade_exact_view(p, Vec3::Z, VIEW).unwrap();
         for t in thresholds() {
-            assert_contract(&format!("e={e}"), &s.shade_view(p, Vec3::Z, VIEW, t).unwrap(), exact);
+            assert_contract(
+                &format!("e={e}"),
+                &s.shade_view(p, Vec3::Z, VIEW, t).unwrap(),
+                exact,
+            );
         }
     }
 }
@@ -374,14 +456,22 @@ fn phong_lobe_narrower_than_a_node_cone() {
     let r = Vec3::new(-0.6, 0.0, 0.8); // mirror of v about n
     let mut lights = vec![PointLight::new(r * 10.0, Vec3::ONE); 64];
     let mut rng = Rng(16);
-    lights.extend((0..3000).map(|_| PointLight::new(r * 10.0 + rng.in_cube(3.0), Vec3::splat(0.5))));
+    lights
+        .extend((0..3000).map(|_| PointLight::new(r * 10.0 + rng.in_cube(3.0), Vec3::splat(0.5))));
     let tree = LightTree::build(&lights).unwrap();
     for e in [1e4f32, 1e6] {
         let mut s = tree.shading(Phong::new(Vec3::ONE, e));
         let exact = s.shade_exact_view(Vec3::ZERO, n, v).unwrap();
-        assert!(exact.min_element() > 0.5, "the lobe sees the coincident lights: {exact}");
+        assert!(
+            exact.min_element() > 0.5,
+            "the lobe sees the coincident lights: {exact}"
+        );
         for t in thresholds() {
-            assert_contract(&format!("e={e}"), &s.shade_view(Vec3::ZERO, n, v, t).unwrap(), exact);
+            assert_contract(
+                &format!("e={e}"),
+                &s.shade_view(Vec3::ZERO, n, v, t).unwrap(),
+                exact,
+            );
         }
     }
     // Coincident lights alone: the node bound must contain the exact value
@@ -389,7 +479,9 @@ fn phong_lobe_narrower_than_a_node_cone() {
     let tree = LightTree::build(&lights[..64]).unwrap();
     let mut s = tree.shading(Phong::new(Vec3::ONE, 1e6));
     let exact = s.shade_exact_view(Vec3::ZERO, n, v).unwrap();
-    let root_only = s.shade_view(Vec3::ZERO, n, v, Threshold::absolute(f64::INFINITY)).unwrap();
+    let root_only = s
+        .shade_view(Vec3::ZERO, n, v, Threshold::absolute(f64::INFINITY))
+        .unwrap();
     assert_eq!(root_only.nodes_evaluated, 1);
     assert_contract("coincident in the lobe", &root_only, exact);
 }
@@ -402,13 +494,22 @@ fn thresholds_zero_infinite_nan_negative() {
     let p = Vec3::new(0.0, 0.0, -20.0);
     let exact = s.shade_exact(p, Vec3::Z).unwrap();
     let zero = s.shade(p, Vec3::Z, Threshold::exact()).unwrap();
-    assert!((zero.radiance - exact).abs().max_element() <= 2.0 * ROUNDING_ALLOWANCE * exact.max_element());
+    assert!(
+        (zero.radiance - exact).abs().max_element()
+            <= 2.0 * ROUNDING_ALLOWANCE * exact.max_element()
+    );
     assert_eq!(zero.error_bound, DVec3::ZERO);
-    let inf = s.shade(p, Vec3::Z, Threshold::absolute(f64::INFINITY)).unwrap();
+    let inf = s
+        .shade(p, Vec3::Z, Threshold::absolute(f64::INFINITY))
+        .unwrap();
     assert_eq!(inf.nodes_evaluated, 1);
     assert_contract("infinite", &inf, exact);
     for bad in [f64::NAN, -1.0, -0.0 - 1e-300] {
-        for t in [Threshold::absolute(bad), Threshold::relative(bad), Threshold::absolute(1.0).with_max_contribution(bad)] {
+        for t in [
+            Threshold::absolute(bad),
+            Threshold::relative(bad),
+            Threshold::absolute(1.0).with_max_contribution(bad),
+        ] {
             assert!(
                 matches!(s.shade(p, Vec3::Z, t), Err(ShadeError::InvalidThreshold(_))),
                 "{t:?} accepted"
@@ -425,14 +526,18 @@ fn node_budgets_zero_and_one() {
     let p = Vec3::new(0.0, 0.0, -8.0);
     let exact = s.shade_exact(p, Vec3::Z).unwrap();
     for b in [0, 1] {
-        let r = s.shade(p, Vec3::Z, Threshold::exact().with_budget(b)).unwrap();
+        let r = s
+            .shade(p, Vec3::Z, Threshold::exact().with_budget(b))
+            .unwrap();
         assert_eq!(r.cost(), 1, "budget {b}: the root only");
         assert_eq!(r.stop, Stop::Budget);
         assert_contract(&format!("budget {b}"), &r, exact);
     }
     // Inside the root's ball: the root has no finite bound, so a budget of 1
     // reports an infinite (documented) bound rather than a wrong one.
-    let r = s.shade(Vec3::ZERO, Vec3::Z, Threshold::exact().with_budget(1)).unwrap();
+    let r = s
+        .shade(Vec3::ZERO, Vec3::Z, Threshold::exact().with_budget(1))
+        .unwrap();
     assert_eq!(r.stop, Stop::Budget);
     assert!(r.error_bound.max_element().is_infinite() && r.radiance.is_finite());
 }
@@ -444,10 +549,14 @@ fn non_unit_normals_are_normalized() {
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     let p = Vec3::new(0.0, 0.0, -8.0);
     let n = Vec3::new(0.2, -0.1, 1.0);
-    let unit = s.shade(p, n.normalize(), Threshold::relative(0.01)).unwrap();
+    let unit = s
+        .shade(p, n.normalize(), Threshold::relative(0.01))
+        .unwrap();
     for scale in [1e-30f32, 1e-3, 7.0, 1e30] {
         let r = s.shade(p, n * scale, Threshold::relative(0.01)).unwrap();
-        assert!((r.radiance - unit.radiance).abs().max_element() <= 1e-6 * unit.radiance.max_element());
+        assert!(
+            (r.radiance - unit.radiance).abs().max_element() <= 1e-6 * unit.radiance.max_element()
+        );
     }
 }
 
@@ -457,13 +566,23 @@ fn zero_or_non_finite_normal_and_view_are_errors() {
     let tree = LightTree::build(&lights).unwrap();
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     let t = Threshold::relative(0.01);
-    for n in [Vec3::ZERO, Vec3::new(f32::NAN, 0.0, 1.0), Vec3::new(f32::INFINITY, 0.0, 0.0)] {
+    for n in [
+        Vec3::ZERO,
+        Vec3::new(f32::NAN, 0.0, 1.0),
+        Vec3::new(f32::INFINITY, 0.0, 0.0),
+    ] {
         assert_eq!(s.shade(Vec3::ZERO, n, t), Err(ShadeError::InvalidNormal));
         assert_eq!(s.shade_exact(Vec3::ZERO, n), Err(ShadeError::InvalidNormal));
     }
-    assert_eq!(s.shade(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::Z, t), Err(ShadeError::NonFinitePoint));
+    assert_eq!(
+        s.shade(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::Z, t),
+        Err(ShadeError::NonFinitePoint)
+    );
     let mut p = tree.shading(Phong::new(Vec3::ONE, 10.0));
-    assert_eq!(p.shade_view(Vec3::ZERO, Vec3::Z, Vec3::ZERO, t), Err(ShadeError::InvalidView));
+    assert_eq!(
+        p.shade_view(Vec3::ZERO, Vec3::Z, Vec3::ZERO, t),
+        Err(ShadeError::InvalidView)
+    );
 }
 
 #[test]
@@ -471,7 +590,12 @@ fn sums_that_overflow_f32() {
     // 1000 lights of 1e38 at unit distance: the sum (~1e41) exceeds f32::MAX.
     let mut rng = Rng(21);
     let lights: Vec<_> = (0..1000)
-        .map(|_| PointLight::new(Vec3::new(0.0, 0.0, 1.0) + rng.in_cube(0.1), Vec3::splat(1e38)))
+        .map(|_| {
+            PointLight::new(
+                Vec3::new(0.0, 0.0, 1.0) + rng.in_cube(0.1),
+                Vec3::splat(1e38),
+            )
+        })
         .collect();
     let exact = check_all(&lights, Vec3::ZERO, Vec3::Z, VIEW);
     assert!(exact.max_element() > f64::from(f32::MAX));
@@ -483,11 +607,29 @@ fn sums_that_overflow_f32() {
 fn bad_lights_are_refused_with_their_index() {
     let good = PointLight::new(Vec3::ONE, Vec3::ONE);
     let cases = [
-        (PointLight::new(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::ONE), BuildError::NonFinitePosition { index: 2 }),
-        (PointLight::new(Vec3::new(0.0, f32::INFINITY, 0.0), Vec3::ONE), BuildError::NonFinitePosition { index: 2 }),
-        (PointLight::new(Vec3::new(0.0, 0.0, 1e19), Vec3::ONE), BuildError::PositionOutOfRange { index: 2, max: manylights::MAX_COORDINATE }),
-        (PointLight::new(Vec3::ONE, Vec3::new(1.0, f32::NAN, 0.0)), BuildError::NonFiniteIntensity { index: 2 }),
-        (PointLight::new(Vec3::ONE, Vec3::new(1.0, 0.0, -1e-30)), BuildError::NegativeIntensity { index: 2 }),
+        (
+            PointLight::new(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::ONE),
+            BuildError::NonFinitePosition { index: 2 },
+        ),
+        (
+            PointLight::new(Vec3::new(0.0, f32::INFINITY, 0.0), Vec3::ONE),
+            BuildError::NonFinitePosition { index: 2 },
+        ),
+        (
+            PointLight::new(Vec3::new(0.0, 0.0, 1e19), Vec3::ONE),
+            BuildError::PositionOutOfRange {
+                index: 2,
+                max: manylights::MAX_COORDINATE,
+            },
+        ),
+        (
+            PointLight::new(Vec3::ONE, Vec3::new(1.0, f32::NAN, 0.0)),
+            BuildError::NonFiniteIntensity { index: 2 },
+        ),
+        (
+            PointLight::new(Vec3::ONE, Vec3::new(1.0, 0.0, -1e-30)),
+            BuildError::NegativeIntensity { index: 2 },
+        ),
     ];
     for (bad, err) in cases {
         assert_eq!(LightTree::build(&[good, good, bad, good]).unwrap_err(), err);
@@ -503,8 +645,14 @@ fn bad_materials_are_sanitized_or_refused() {
     assert!(Lambert::try_new(Vec3::new(-1.0, 0.0, 0.0)).is_err());
     assert!(Phong::try_new(Vec3::ONE, f32::NAN).is_err());
     assert!(Phong::try_new(Vec3::ONE, 2e6).is_err());
-    assert_eq!(Lambert::new(Vec3::new(f32::NAN, -1.0, 0.5)).kd(), DVec3::new(0.0, 0.0, 0.5));
-    assert_eq!(Phong::new(Vec3::ONE, f32::INFINITY).exponent(), manylights::phong::MAX_EXPONENT);
+    assert_eq!(
+        Lambert::new(Vec3::new(f32::NAN, -1.0, 0.5)).kd(),
+        DVec3::new(0.0, 0.0, 0.5)
+    );
+    assert_eq!(
+        Phong::new(Vec3::ONE, f32::INFINITY).exponent(),
+        manylights::phong::MAX_EXPONENT
+    );
     let lights = random_lights(100, 5.0, 22);
     check_all(&lights, Vec3::new(0.0, 0.0, -8.0), Vec3::Z, VIEW);
 }

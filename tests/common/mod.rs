@@ -52,7 +52,10 @@ pub fn uniform_lights(max: usize) -> impl Strategy<Value = Vec<PointLight>> {
 pub fn clustered_lights(max: usize) -> impl Strategy<Value = Vec<PointLight>> {
     (
         prop::collection::vec((vec_in(8.0), 0.01f32..=2.0), 1..=8),
-        prop::collection::vec((any::<prop::sample::Index>(), vec_in(1.0), intensity()), 1..=max),
+        prop::collection::vec(
+            (any::<prop::sample::Index>(), vec_in(1.0), intensity()),
+            1..=max,
+        ),
     )
         .prop_map(|(clusters, members)| {
             members
@@ -78,7 +81,8 @@ pub fn threshold() -> impl Strategy<Value = Threshold> {
         Just(Threshold::exact()),
         Just(Threshold::absolute(f64::INFINITY)),
         (1u32..=5000, 1e-4f64..=0.5).prop_map(|(b, t)| Threshold::relative(t).with_budget(b)),
-        (1e-4f64..=0.5, 1.1f64..=8.0).prop_map(|(t, band)| Threshold::relative(t).with_interpolation(band)),
+        (1e-4f64..=0.5, 1.1f64..=8.0)
+            .prop_map(|(t, band)| Threshold::relative(t).with_interpolation(band)),
         (-6.0f64..=3.0, 1.1f64..=8.0)
             .prop_map(|(u, band)| Threshold::absolute(10f64.powf(u)).with_interpolation(band)),
     ]
@@ -97,7 +101,11 @@ pub fn check_bound(r: &ShadeResult, exact: glam::DVec3) -> Result<(), TestCaseEr
             exact[k],
             r.error_bound[k]
         );
-        prop_assert!(r.radiance[k].is_finite(), "radiance not finite: {}", r.radiance);
+        prop_assert!(
+            r.radiance[k].is_finite(),
+            "radiance not finite: {}",
+            r.radiance
+        );
         prop_assert!(!r.error_bound[k].is_nan(), "bound is NaN");
     }
     Ok(())
@@ -119,7 +127,11 @@ pub fn check_threshold(r: &ShadeResult, t: &Threshold) -> Result<(), TestCaseErr
         ),
     }
     if let Some(m) = t.budget() {
-        prop_assert!(r.cost() <= m.max(1) || r.cost() == r.lights_evaluated, "cost {} > budget {m}", r.cost());
+        prop_assert!(
+            r.cost() <= m.max(1) || r.cost() == r.lights_evaluated,
+            "cost {} > budget {m}",
+            r.cost()
+        );
     }
     Ok(())
 }

@@ -1,0 +1,58 @@
+//! Criterion bench of the tree build: `LightTree::build` over city street
+//! lamps (the report's layout, fixed density), 10^3 to 10^6 lights.
+//!
+//! ```text
+//! cargo bench --bench build
+//! ```
+//!
+//! Throughput is reported in lights per second; the report
+//! (`cargo run --release --example report`) prints build time and memory
+//! per light as well.
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{
+    BenchmarkId, Criterion, SamplingMode, Throughput, criterion_group, criterion_main,
+};
+use manylights::LightTree;
+
+// Shared with the report, which uses every scene; this bench only needs the
+// city's light layout.
+#[allow(dead_code)]
+#[path = "../examples/report/scenes.rs"]
+mod scenes;
+
+/// Numbers of lights.
+const SIZES: [usize; 4] = [1_000, 10_000, 100_000, 1_000_000];
+/// From this size on, a build takes a good fraction of a second: few flat
+/// samples and a longer measurement window.
+const LARGE: usize = 1_000_000;
+const SEED: u64 = 1998;
+
+fn build(c: &mut Criterion) {
+    let mut group = c.benchmark_group("build");
+    group.warm_up_time(Duration::from_millis(500));
+    for n in SIZES {
+        let lights = scenes::city_lights(n, SEED);
+        group.throughput(Throughput::Elements(n as u64));
+        if n >= LARGE {
+            group
+                .sampling_mode(SamplingMode::Flat)
+                .sample_size(10)
+                .measurement_time(Duration::from_secs(10));
+        } else {
+            group
+                .sampling_mode(SamplingMode::Auto)
+                .sample_size(20)
+                .measurement_time(Duration::from_secs(2));
+        }
+        group.bench_with_input(BenchmarkId::from_parameter(n), &lights, |b, lights| {
+            b.iter(|| LightTree::build(black_box(lights)).expect("valid lights"));
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, build);
+criterion_main!(benches);

@@ -1,0 +1,204 @@
+//! Timing and error statistics of one configuration over a scene's shading
+//! points, and the rows the report writes.
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+
+/// At most this many timed passes over the shading points per
+/// configuration; the fastest is kept.
+pub const MAX_PASSES: usize = 7;
+
+/// What one method returns for one shading point.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Sample {
+    /// The estimated radiance.
+    pub radiance: DVec3,
+    /// The certified error bound, for certified methods.
+    pub bound: Option<DVec3>,
+    /// Work done, in the method's own unit (node bounds plus light
+    /// evaluations for cuts, samples for Monte Carlo, lights for the exact
+    /// sum).
+    pub cost: u32,
+}
+
+/// Time and accuracy of one configuration over a set of shading points.
+#[derive(Clone, Copy, Debug)]
+pub struct Measurement {
+    /// Seconds per shading point: the fastest pass's total divided by the
+    /// number of points.
+    pub seconds_per_point: f64,
+    /// Mean over the points of the relative error (largest channel).
+    pub mean_error: f64,
+    /// Largest relative error over the points.
+    pub max_error: f64,
+    /// Mean and largest relative certified bound, for certified methods.
+    pub bound: Option<(f64, f64)>,
+    /// Mean cost per point.
+    pub mean_cost: f64,
+}
+
+/// Relative error in the largest channel: `max_k |estimate_k - exact_k| /
+/// max_k exact_k` (the normalization of the crate's relative threshold, so
+/// that a dim channel of a coloured light does not blow the ratio up).
+pub fn relative(difference: DVec3, exact: DVec3) -> f64 {
+    difference.abs().max_element() / exact.max_element()
+}
+
+/// Runs `shade` over every point index `0..references.len()`, timing whole
+/// passes: the first pass records the samples, then passes repeat while the
+/// total stays within `budget` (at most [`MAX_PASSES`]); the fastest pass
+/// counts. Single-threaded, so a time per point is a time per point.
+pub fn measure(
+    references: &[DVec3],
+    budget: Duration,
+    mut shade: impl FnMut(usize) -> Sample,
+) -> Measurement {
+    let points = references.len();
+    let mut samples = vec![Sample::default(); points];
+    let started = Instant::now();
+    let mut fastest = Duration::MAX;
+    for _ in 0..MAX_PASSES {
+        let t = Instant::now();
+        for (i, sample) in samples.iter_mut().enumerate() {
+            *sample = black_box(shade(black_box(i)));
+        }
+        let elapsed = t.elapsed();
+        fastest = fastest.min(elapsed);
+        if started.elapsed() + fastest > budget {
+            break;
+        }
+    }
+    let n = points as f64;
+    let errors: Vec<f64> = samples
+        .iter()
+        .zip(references)
+        .map(|(s, &exact)| relative(s.radiance - exact, exact))
+        .collect();
+    let bounds: Option<Vec<f64>> = samples
+        .iter()
+        .zip(references)
+        .map(|(s, &exact)| s.bound.map(|b| relative(b, exact)))
+        .collect();
+    Measurement {
+        seconds_per_point: fastest.as_secs_f64() / n,
+        mean_error: errors.iter().sum::<f64>() / n,
+        max_error: errors.iter().copied().fold(0.0, f64::max),
+        bound: bounds.map(|b| {
+            (
+                b.iter().sum::<f64>() / n,
+                b.iter().copied().fold(0.0, f64::max),
+            )
+        }),
+        mean_cost: samples.iter().map(|s| f64::from(s.cost)).sum::<f64>() / n,
+    }
+}
+
+/// The methods compared by the report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// (a) The exact sum, vectorized `f32` structure-of-arrays.
+    ExactSoa,
+    /// (b) The crate's cut with the paper's first-order bound, relative
+    /// thresholds.
+    TreePaper,
+    /// (c) The crate's cut with its tightest bound, relative thresholds.
+    TreeRelative,
+    /// (c) The crate's cut with its tightest bound, absolute thresholds.
+    TreeAbsolute,
+    /// (d) Lightcuts-style per-node criterion (not certified).
+    Lightcuts,
+    /// (e) Monte Carlo light sampling proportional to power.
+    PowerSampling,
+    /// (f) Importance sampling down the light tree.
+    TreeSampling,
+}
+
+impl Method {
+    /// Every method, in plotting order.
+    pub const ALL: [Method; 7] = [
+        Method::ExactSoa,
+        Method::TreePaper,
+        Method::TreeRelative,
+        Method::TreeAbsolute,
+        Method::Lightcuts,
+        Method::PowerSampling,
+        Method::TreeSampling,
+    ];
+
+    /// Identifier used in the CSV files.
+    pub fn id(self) -> &'static str {
+        match self {
+            Method::ExactSoa => "exact-soa",
+            Method::TreePaper => "tree-paper-bound",
+            Method::TreeRelative => "tree-tight-relative",
+            Method::TreeAbsolute => "tree-tight-absolute",
+            Method::Lightcuts => "lightcuts",
+            Method::PowerSampling => "mc-power",
+            Method::TreeSampling => "mc-tree",
+        }
+    }
+
+    /// Legend text.
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::ExactSoa => "(a) exact sum, f32 SIMD",
+            Method::TreePaper => "(b) tree, paper's bound, relative t",
+            Method::TreeRelative => "(c) tree, tight bound, relative t",
+            Method::TreeAbsolute => "(c) tree, tight bound, absolute t",
+            Method::Lightcuts => "(d) Lightcuts criterion (not certified)",
+            Method::PowerSampling => "(e) MC, power sampling",
+            Method::TreeSampling => "(f) MC, light-tree sampling",
+        }
+    }
+
+    /// The crate's certified configurations with the best bound: what
+    /// "the tree" means when a baseline is compared with it.
+    pub fn is_best_tree(self) -> bool {
+        matches!(self, Method::TreeRelative | Method::TreeAbsolute)
+    }
+}
+
+/// One configuration's result on one scene: a row of `errors.csv`.
+#[derive(Clone, Debug)]
+pub struct Record {
+    /// Scene name.
+    pub scene: String,
+    /// Number of lights in the scene.
+    pub lights: usize,
+    /// The method.
+    pub method: Method,
+    /// The method's parameter, as written (`t=0.01`, `abs=0.02`, `n=64`).
+    pub parameter: String,
+    /// Time and accuracy.
+    pub measurement: Measurement,
+}
+
+/// Header of `errors.csv` and `scaling.csv`.
+pub const CSV_HEADER: &str = "scene,lights,method,parameter,time_per_point_us,\
+mean_rel_error,max_rel_error,mean_rel_bound,max_rel_bound,mean_cost";
+
+impl Record {
+    /// The record as a CSV line (without newline).
+    pub fn csv(&self) -> String {
+        let m = &self.measurement;
+        let (mean_bound, max_bound) = match m.bound {
+            Some((mean, max)) => (format!("{mean:.6e}"), format!("{max:.6e}")),
+            None => (String::new(), String::new()),
+        };
+        format!(
+            "{},{},{},{},{:.4},{:.6e},{:.6e},{},{},{:.1}",
+            self.scene,
+            self.lights,
+            self.method.id(),
+            self.parameter,
+            m.seconds_per_point * 1e6,
+            m.mean_error,
+            m.max_error,
+            mean_bound,
+            max_bound,
+            m.mean_cost
+        )
+    }
+}

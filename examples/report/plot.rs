@@ -1,0 +1,153 @@
+//! SVG plots of the report (log-log), drawn with `plotters`.
+
+use std::error::Error;
+use std::path::Path;
+
+use plotters::prelude::*;
+
+/// Plot size in pixels: two panels side by side for error plots.
+const ERROR_PLOT_SIZE: (u32, u32) = (1600, 700);
+const SCALING_PLOT_SIZE: (u32, u32) = (900, 650);
+/// Errors below this are drawn at it (a log axis has no 0).
+pub const ERROR_FLOOR: f64 = 1e-9;
+/// Margin factor around the data on each log axis.
+const AXIS_MARGIN: f64 = 1.6;
+const MARKER_SIZE: i32 = 4;
+const FONT: &str = "sans-serif";
+
+/// How a series is drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Style {
+    /// Solid line with filled circles.
+    Solid,
+    /// Dashed line with hollow triangles (certified bounds).
+    Dashed,
+}
+
+/// One labelled curve.
+#[derive(Clone, Debug)]
+pub struct Series {
+    /// Legend text.
+    pub label: String,
+    /// Colour.
+    pub colour: RGBColor,
+    /// How it is drawn.
+    pub style: Style,
+    /// Points `(x, y)`, both positive, in drawing order.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// One panel: a caption, axis descriptions and its curves.
+pub struct Panel<'a> {
+    /// Panel title.
+    pub caption: &'a str,
+    /// X axis description.
+    pub x_desc: &'a str,
+    /// Y axis description.
+    pub y_desc: &'a str,
+    /// The curves.
+    pub series: &'a [Series],
+    /// Where the legend goes (the corner the curves leave empty).
+    pub legend: SeriesLabelPosition,
+}
+
+/// Writes `panels` side by side into one SVG at `path`.
+pub fn write_panels(path: &Path, panels: &[Panel<'_>]) -> Result<(), Box<dyn Error>> {
+    let size = if panels.len() > 1 {
+        ERROR_PLOT_SIZE
+    } else {
+        SCALING_PLOT_SIZE
+    };
+    let root = SVGBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE)?;
+    let areas = root.split_evenly((1, panels.len()));
+    for (area, panel) in areas.iter().zip(panels) {
+        draw_panel(area, panel)?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Bounds `[lo / margin, hi * margin]` of the positive values `v`.
+fn log_range(v: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+    let (lo, hi) = v.fold((f64::INFINITY, 0.0f64), |(lo, hi), x| {
+        (lo.min(x), hi.max(x))
+    });
+    if lo.is_finite() && hi > 0.0 {
+        lo / AXIS_MARGIN..hi * AXIS_MARGIN
+    } else {
+        1.0..10.0
+    }
+}
+
+fn draw_panel(
+    area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    panel: &Panel<'_>,
+) -> Result<(), Box<dyn Error>> {
+    let clamp = |(x, y): (f64, f64)| (x, y.max(ERROR_FLOOR));
+    let all = || {
+        panel
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter().copied().map(clamp))
+    };
+    let x_range = log_range(all().map(|p| p.0));
+    let y_range = log_range(all().map(|p| p.1));
+    let mut chart = ChartBuilder::on(area)
+        .caption(panel.caption, (FONT, 20))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x_range.log_scale(), y_range.log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc(panel.x_desc)
+        .y_desc(panel.y_desc)
+        .x_label_formatter(&|x| format!("{x:.0e}"))
+        .y_label_formatter(&|y| format!("{y:.0e}"))
+        .draw()?;
+    for series in panel.series {
+        let colour = series.colour;
+        let points: Vec<(f64, f64)> = series.points.iter().copied().map(clamp).collect();
+        let line = colour.stroke_width(2);
+        match series.style {
+            Style::Solid => {
+                chart
+                    .draw_series(LineSeries::new(points.clone(), line))?
+                    .label(&series.label)
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                    });
+                chart.draw_series(
+                    points
+                        .iter()
+                        .map(|&p| Circle::new(p, MARKER_SIZE, colour.filled())),
+                )?;
+            }
+            Style::Dashed => {
+                chart
+                    .draw_series(DashedLineSeries::new(points.clone(), 6, 4, line))?
+                    .label(&series.label)
+                    .legend(move |(x, y)| {
+                        PathElement::new(
+                            vec![(x, y), (x + 8, y), (x + 12, y), (x + 20, y)],
+                            colour.stroke_width(1),
+                        )
+                    });
+                chart.draw_series(
+                    points
+                        .iter()
+                        .map(|&p| TriangleMarker::new(p, MARKER_SIZE + 1, colour)),
+                )?;
+            }
+        }
+    }
+    chart
+        .configure_series_labels()
+        .position(panel.legend.clone())
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 13))
+        .draw()?;
+    Ok(())
+}
