@@ -11,7 +11,7 @@
 //!   the sphere, then scaled by a length in `[0.1, 10]` (the crate
 //!   normalizes).
 //! * Thresholds: absolute `10^u` with `u` in `[-6, 3]`, relative in
-//!   `[1e-4, 0.5]`, exactly 0, infinite, budgets of 1 to 5,000, and
+//!   `[1e-4, 0.5]`, per-node (Lightcuts) in `[1e-4, 0.5]`, exactly 0, infinite, budgets of 1 to 5,000, and
 //!   interpolation bands of 1.1 to 8.
 #![allow(dead_code)]
 
@@ -78,6 +78,7 @@ pub fn threshold() -> impl Strategy<Value = Threshold> {
     prop_oneof![
         (-6.0f64..=3.0).prop_map(|u| Threshold::absolute(10f64.powf(u))),
         (1e-4f64..=0.5).prop_map(Threshold::relative),
+        (1e-4f64..=0.5).prop_map(Threshold::per_node),
         Just(Threshold::exact()),
         Just(Threshold::absolute(f64::INFINITY)),
         (1u32..=5000, 1e-4f64..=0.5).prop_map(|(b, t)| Threshold::relative(t).with_budget(b)),
@@ -120,6 +121,8 @@ pub fn check_threshold(r: &ShadeResult, t: &Threshold) -> Result<(), TestCaseErr
     let err = r.error_bound.max_element();
     match t.target() {
         manylights::Target::Absolute(a) => prop_assert!(err <= a * (1.0 + 1e-9), "{err} > {a}"),
+        // Lightcuts' criterion holds single nodes, not the sum, to `q`.
+        manylights::Target::PerNode(_) => {}
         manylights::Target::Relative(q) => prop_assert!(
             err <= q * r.radiance.max_element() * (1.0 + 1e-9) + 1e-300,
             "{err} > {q} * {}",
