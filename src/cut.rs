@@ -285,23 +285,77 @@ struct Entry {
     error: DVec3,
 }
 
-impl PartialEq for Entry {
+/// What the heap of the error list orders: an entry's class and key, and
+/// where its record lies. Kept to 16 bytes so that sifting is cheap.
+#[derive(Clone, Copy, Debug)]
+struct Key {
+    key: f64,
+    slot: u32,
+    class: u8,
+}
+
+impl PartialEq for Key {
     fn eq(&self, other: &Self) -> bool {
         self.cmp(other) == Ordering::Equal
     }
 }
-impl Eq for Entry {}
-impl PartialOrd for Entry {
+impl Eq for Key {}
+impl PartialOrd for Key {
     fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
         Some(self.cmp(other))
     }
 }
-impl Ord for Entry {
+impl Ord for Key {
+    #[inline]
     fn cmp(&self, other: &Self) -> Ordering {
         self.class
             .cmp(&other.class)
             .then(self.key.total_cmp(&other.key))
-            .then(other.node.cmp(&self.node))
+    }
+}
+
+/// The paper's error list: unrefined nodes by decreasing (class, error),
+/// their records in a side vector. Both keep their capacity across calls.
+#[derive(Debug, Default)]
+struct ErrorList {
+    heap: BinaryHeap<Key>,
+    entries: Vec<Entry>,
+}
+
+impl ErrorList {
+    fn clear(&mut self) {
+        self.heap.clear();
+        self.entries.clear();
+    }
+
+    #[inline]
+    fn push(&mut self, e: Entry) {
+        let slot = self.entries.len() as u32;
+        self.heap.push(Key {
+            key: e.key,
+            slot,
+            class: e.class,
+        });
+        self.entries.push(e);
+    }
+
+    #[inline]
+    fn peek(&self) -> Option<&Entry> {
+        self.heap.peek().map(|k| &self.entries[k.slot as usize])
+    }
+
+    #[inline]
+    fn pop(&mut self) -> Option<Entry> {
+        self.heap.pop().map(|k| self.entries[k.slot as usize])
+    }
+
+    fn is_empty(&self) -> bool {
+        self.heap.is_empty()
+    }
+
+    /// The unrefined entries, in no particular order.
+    fn iter(&self) -> impl Iterator<Item = &Entry> {
+        self.heap.iter().map(|k| &self.entries[k.slot as usize])
     }
 }
 
@@ -318,7 +372,7 @@ impl Ord for Entry {
 pub struct Shading<'t, S: Shader> {
     tree: &'t LightTree,
     shader: S,
-    heap: BinaryHeap<Entry>,
+    list: ErrorList,
     blend_stack: Vec<(u32, f64, bool)>,
 }
 
@@ -328,7 +382,7 @@ impl LightTree {
         Shading {
             tree: self,
             shader,
-            heap: BinaryHeap::new(),
+            list: ErrorList::default(),
             blend_stack: Vec::new(),
         }
     }
@@ -502,14 +556,14 @@ impl<'t, S: Shader> Shading<'t, S> {
         call: &mut Call<'_, S::Frame, V>,
     ) -> Option<Entry> {
         let node: &Node = &self.tree.nodes[index];
+        if node.intensity == DVec3::ZERO {
+            // Dark node: exactly zero whatever its geometry, even when its
+            // ball holds the shading point; no query is needed.
+            return None;
+        }
         if node.light_count == 1 {
             let light = self.tree.lights[node.first_light as usize];
             self.exact_light(light.position, light.intensity, visible, weight, call);
-            return None;
-        }
-        if node.intensity == DVec3::ZERO {
-            // Dark node: exactly zero whatever its geometry, even when its
-            // ball holds the shading point.
             return None;
         }
         let mut partial = false;
@@ -630,7 +684,7 @@ impl<'t, S: Shader> Shading<'t, S> {
     fn heap_sums(&self) -> (DVec3, DVec3) {
         let mut estimate = CompensatedSum::default();
         let mut error = CompensatedSum::default();
-        for e in self.heap.iter() {
+        for e in self.list.iter() {
             estimate.add(e.estimate);
             error.add(e.error);
         }
@@ -655,10 +709,10 @@ impl<'t, S: Shader> Shading<'t, S> {
             visibility,
             tally: Tally::default(),
         };
-        let mut heap = core::mem::take(&mut self.heap);
+        let mut heap = core::mem::take(&mut self.list);
         heap.clear();
         // Adds an entry to the error list and the running sums.
-        let push = |heap: &mut BinaryHeap<Entry>, e: Entry, tally: &mut Tally| {
+        let push = |heap: &mut ErrorList, e: Entry, tally: &mut Tally| {
             match e.class {
                 CLASS_UNBOUNDED => tally.unbounded += 1,
                 CLASS_OVER_CONTRIBUTION => tally.over_contribution += 1,
@@ -685,9 +739,9 @@ impl<'t, S: Shader> Shading<'t, S> {
                 && t.over_contribution == 0
                 && threshold.met(t.settled.value() + t.estimate, t.error, largest)
             {
-                self.heap = heap;
+                self.list = heap;
                 (t.estimate, t.error) = self.heap_sums();
-                heap = core::mem::take(&mut self.heap);
+                heap = core::mem::take(&mut self.list);
                 if threshold.met(t.settled.value() + t.estimate, t.error, largest) {
                     break;
                 }
@@ -721,7 +775,7 @@ impl<'t, S: Shader> Shading<'t, S> {
                 push(&mut heap, e, &mut call.tally)
             });
         }
-        self.heap = heap;
+        self.list = heap;
         let (estimate, error) = self.heap_sums();
         let unbounded = call.tally.unbounded > 0;
         let mut radiance = call.tally.settled.value() + estimate;
@@ -731,7 +785,7 @@ impl<'t, S: Shader> Shading<'t, S> {
             // would have stopped one step earlier) and the largest key left,
             // in proportion to where the excess crossed zero, so that it is
             // continuous where the stopping step changes.
-            let top = self.heap.peek().map_or(0.0, |e| e.key);
+            let top = self.list.peek().map_or(0.0, |e| e.key);
             let level = match last_step {
                 Some((before, key)) if before > 0.0 && before.is_finite() => {
                     let after = threshold.excess(radiance, error, top);
@@ -780,7 +834,7 @@ impl<'t, S: Shader> Shading<'t, S> {
         band: f64,
         call: &mut Call<'_, S::Frame, V>,
     ) -> Option<(DVec3, DVec3)> {
-        if self.heap.is_empty() || !(level > 0.0 && level.is_finite()) {
+        if self.list.is_empty() || !(level > 0.0 && level.is_finite()) {
             return None;
         }
         let floor = level / band;
@@ -804,8 +858,8 @@ impl<'t, S: Shader> Shading<'t, S> {
                 stack.push((e.node, weight * alpha, e.visible));
             }
         };
-        for e in self.heap.drain() {
-            settle(e, 1.0, &mut stack);
+        for k in self.list.heap.drain() {
+            settle(self.list.entries[k.slot as usize], 1.0, &mut stack);
         }
         while let Some((index, weight, visible)) = stack.pop() {
             let node = self.tree.nodes[index as usize];
