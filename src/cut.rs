@@ -237,7 +237,8 @@ pub struct ShadeResult {
     /// Estimated RGB radiance.
     pub radiance: DVec3,
     /// Certified bound on `|radiance - exact|` per channel, up to
-    /// [`ROUNDING_ALLOWANCE`] of the exact value (see the crate docs).
+    /// [`ROUNDING_ALLOWANCE`](crate::ROUNDING_ALLOWANCE) of the exact value (see
+    /// the crate docs).
     pub error_bound: DVec3,
     /// Node bounds computed.
     pub nodes_evaluated: u32,
