@@ -154,9 +154,10 @@ impl Threshold {
     /// can exceed the error list's when children's errors outweigh their
     /// parent's), the unblended result is returned. `band` must be finite and
     /// greater than 1 ([`ShadeError::InvalidBand`] otherwise). Measured on a
-    /// street-light city (`cargo run --release --example seams`), band 3
-    /// makes the largest jump of the relative error along a scanline 6 to 20
-    /// times smaller for about 1.3 times the node evaluations.
+    /// street-light city along a scanline of 100,000 points (`cargo run
+    /// --release --example seams`), band 2 makes the largest jump of the
+    /// relative error 10 to 15 times smaller at thresholds of 1% to 20%, for
+    /// about 1.25 times the evaluations and 1.45 times the time.
     pub const fn with_interpolation(mut self, band: f64) -> Self {
         self.band = Some(band);
         self

@@ -53,7 +53,7 @@ fn scan(threshold: Threshold) -> (f64, f64) {
 fn interpolation_shrinks_jumps_along_a_scanline() {
     for t in [0.05, 0.2] {
         let (discrete, discrete_cost) = scan(Threshold::relative(t));
-        let (smooth, smooth_cost) = scan(Threshold::relative(t).with_interpolation(3.0));
+        let (smooth, smooth_cost) = scan(Threshold::relative(t).with_interpolation(2.0));
         assert!(
             smooth * 4.0 <= discrete,
             "threshold {t}: largest jump {smooth:e} with interpolation vs {discrete:e} without"
@@ -75,7 +75,7 @@ fn interpolation_keeps_the_threshold() {
             .shade(
                 p,
                 Vec3::Z,
-                Threshold::relative(0.02).with_interpolation(3.0),
+                Threshold::relative(0.02).with_interpolation(2.0),
             )
             .unwrap();
         assert!(r.error_bound.max_element() <= 0.02 * r.radiance.max_element() * (1.0 + 1e-12));
