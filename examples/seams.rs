@@ -12,9 +12,14 @@
 //! cargo run --release --example seams [-- --band 2 --points 100000 --out DIR]
 //! ```
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
+#[path = "common/mod.rs"]
+#[allow(dead_code)] // this example uses the image helpers only
+mod common;
+
+use common::{exposure, write_difference_linear, write_radiance};
 use glam::{DVec3, Vec3};
 use manylights::{Lambert, LightTree, PointLight, Shading, Threshold};
 use rayon::prelude::*;
@@ -37,8 +42,10 @@ const BAND_DEFAULT: f64 = 2.0;
 /// seams are visible).
 const IMAGE_SIZE: u32 = 256;
 const IMAGE_THRESHOLD: f64 = 0.2;
-/// The difference images map this relative error to full white.
+/// The difference images map this relative error to white.
 const DIFF_FULL_SCALE: f64 = 0.02;
+/// Percentile of the exact image that the exposure maps to white.
+const EXPOSURE_PERCENTILE: f64 = 0.999;
 
 fn city() -> Vec<PointLight> {
     let extent = BLOCK * BLOCKS as f32;
@@ -96,17 +103,6 @@ fn scanline(
     let max_error = rel.iter().map(|r| r.abs()).fold(0.0, f64::max);
     let mean_cost = results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / points.len() as f64;
     (max_jump, max_error, mean_cost, micros)
-}
-
-fn write_png(path: &Path, size: u32, rgb: &[u8]) {
-    let file = std::fs::File::create(path).expect("create image");
-    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), size, size);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Eight);
-    encoder
-        .write_header()
-        .and_then(|mut w| w.write_image_data(rgb))
-        .expect("write image");
 }
 
 fn main() {
@@ -212,23 +208,15 @@ fn main() {
         .par_iter()
         .map(|&p| shading_exact(&tree, p))
         .collect();
-    let exposure = 1.0
-        / exact_img
-            .iter()
-            .map(|e| e.max_element())
-            .fold(0.0, f64::max);
-    let tone = |v: DVec3| -> [u8; 3] {
-        let c = (v * exposure)
-            .clamp(DVec3::ZERO, DVec3::ONE)
-            .powf(1.0 / 2.2)
-            * 255.0;
-        [c.x as u8, c.y as u8, c.z as u8]
-    };
-    write_png(
+    let exp = exposure(&exact_img, EXPOSURE_PERCENTILE);
+    write_radiance(
         &out.join("seams_exact.png"),
         IMAGE_SIZE,
-        &exact_img.iter().flat_map(|&v| tone(v)).collect::<Vec<_>>(),
-    );
+        IMAGE_SIZE,
+        &exact_img,
+        exp,
+    )
+    .expect("write image");
     for interpolated in [false, true] {
         let mut th = Threshold::relative(IMAGE_THRESHOLD);
         if interpolated {
@@ -246,27 +234,28 @@ fn main() {
         } else {
             "discrete"
         };
-        let render: Vec<u8> = img.iter().flat_map(|&v| tone(v)).collect();
-        write_png(&out.join(format!("seams_{name}.png")), IMAGE_SIZE, &render);
-        // Enhanced contrast: |relative error| / DIFF_FULL_SCALE.
-        let diff: Vec<u8> = img
-            .iter()
-            .zip(&exact_img)
-            .flat_map(|(v, e)| {
-                let g = (((*v - *e).abs() / *e).max_element() / DIFF_FULL_SCALE).min(1.0) * 255.0;
-                [g as u8; 3]
-            })
-            .collect();
-        write_png(
-            &out.join(format!("seams_{name}_diff.png")),
+        write_radiance(
+            &out.join(format!("seams_{name}.png")),
             IMAGE_SIZE,
+            IMAGE_SIZE,
+            &img,
+            exp,
+        )
+        .expect("write image");
+        // Enhanced contrast: the relative error, DIFF_FULL_SCALE at white.
+        let diff = out.join(format!("seams_{name}_diff.png"));
+        write_difference_linear(
             &diff,
-        );
+            IMAGE_SIZE,
+            IMAGE_SIZE,
+            &img,
+            &exact_img,
+            DIFF_FULL_SCALE,
+        )
+        .expect("write image");
     }
     println!(
-        "\nimages ({}x{}, threshold {:.0}%, difference: white = {:.0}% relative error): {}/seams_{{exact,discrete,interpolated,discrete_diff,interpolated_diff}}.png",
-        IMAGE_SIZE,
-        IMAGE_SIZE,
+        "\nimages ({IMAGE_SIZE}x{IMAGE_SIZE}, threshold {:.0}%, difference: white = {:.0}% relative error): {}/seams_{{exact,discrete,interpolated,discrete_diff,interpolated_diff}}.png",
         IMAGE_THRESHOLD * 100.0,
         DIFF_FULL_SCALE * 100.0,
         out.display()

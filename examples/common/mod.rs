@@ -262,3 +262,26 @@ pub fn write_difference(
         .collect();
     write_png(path, width, height, &rgb)
 }
+
+/// Writes a linear enhanced-contrast difference image (the paper's): per
+/// pixel the relative error `|tree - exact| / exact` (largest over the
+/// channels) divided by `full_scale` and clamped to `[0, 1]`, so seams where
+/// the error jumps show as edges.
+pub fn write_difference_linear(
+    path: &Path,
+    width: u32,
+    height: u32,
+    tree: &[DVec3],
+    exact: &[DVec3],
+    full_scale: f64,
+) -> std::io::Result<()> {
+    let rgb: Vec<u8> = tree
+        .iter()
+        .zip(exact)
+        .flat_map(|(&t, &e)| {
+            let level = (max_ratio((t - e).abs(), e) / full_scale).clamp(0.0, 1.0);
+            [(level * 255.0).round() as u8; 3]
+        })
+        .collect();
+    write_png(path, width, height, &rgb)
+}
