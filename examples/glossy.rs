@@ -13,7 +13,6 @@
 //! ```
 
 #[path = "common/mod.rs"]
-#[allow(dead_code)] // this example uses the camera and image helpers only
 mod common;
 
 use std::error::Error;

@@ -16,7 +16,6 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 #[path = "common/mod.rs"]
-#[allow(dead_code)] // this example uses the image helpers only
 mod common;
 
 use common::{exposure, write_difference_linear, write_radiance};

@@ -29,12 +29,10 @@ use std::error::Error;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use city::{City, Hit, slab, union};
+use city::{City, Hit, Shadows};
 use common::{Camera, ErrorStats, Options, exposure, mean_per_pixel};
 use glam::{DVec3, Vec3};
-use manylights::{
-    Aabb, Coverage, Lambert, LightTree, NodeBounds, ShadeError, ShadeResult, Threshold, Visibility,
-};
+use manylights::{Lambert, LightTree, ShadeError, ShadeResult, Threshold};
 use rayon::prelude::*;
 
 /// Blocks along each side of the city: a smaller city than `city`'s, since
@@ -56,152 +54,6 @@ const CAMERA_TARGET: Vec3 = Vec3::new(330.0, 260.0, 0.0);
 const CAMERA_FOV_DEGREES: f32 = 50.0;
 /// Percentile of the exact image that the exposure maps to white.
 const EXPOSURE_PERCENTILE: f64 = 0.995;
-
-/// Shadow rays start this far off the surface along its normal, so that a
-/// point on a wall is not occluded by its own building. It is part of the
-/// host's definition of visibility, used alike by the tree's queries and by
-/// the exact sum.
-const SHADOW_OFFSET: f32 = 0.05;
-/// Safety margin of the classifier, in scene units. Coordinates stay below
-/// 1,000, where an `f32` ulp is at most `6.1e-5`; the slab tests and the
-/// shaft slices' corners err by a few ulps. Occluders are inflated by the
-/// margin before a shaft is declared `Visible` and shrunk by it before it is
-/// declared `Occluded`, so rounding cannot turn a conservative answer into a
-/// wrong one.
-const MARGIN: f32 = 0.01;
-
-/// Slices of a shaft whose bounding boxes the classifier tests.
-const SHAFT_PIECES: usize = 8;
-
-/// Occlusion by the city's buildings, for one shading point.
-struct Shadows<'c> {
-    city: &'c City,
-    /// `SHADOW_OFFSET` times the surface normal: queries start at the shading
-    /// point plus this.
-    lift: Vec3,
-    /// Classifications answered: visible, occluded, partial.
-    answers: [u32; 3],
-}
-
-impl Shadows<'_> {
-    /// Counts and returns `coverage`.
-    fn answer(&mut self, coverage: Coverage) -> Coverage {
-        let slot = match coverage {
-            Coverage::Visible => 0,
-            Coverage::Occluded => 1,
-            Coverage::Partial => 2,
-        };
-        self.answers[slot] += 1;
-        coverage
-    }
-}
-
-/// A closed segment, set up for slab tests.
-struct Segment {
-    from: Vec3,
-    /// `1 / (to - from)`.
-    inv_dir: Vec3,
-}
-
-impl Segment {
-    fn new(from: Vec3, to: Vec3) -> Self {
-        Self {
-            from,
-            inv_dir: (to - from).recip(),
-        }
-    }
-
-    /// Whether the segment meets the closed box `b`.
-    fn hits(&self, b: &Aabb) -> bool {
-        let (near, far) = slab(self.from, self.inv_dir, b);
-        near <= far && far >= 0.0 && near <= 1.0
-    }
-}
-
-/// Whether two closed boxes meet.
-fn overlaps(a: &Aabb, b: &Aabb) -> bool {
-    a.min.cmple(b.max).all() && b.min.cmple(a.max).all()
-}
-
-/// `b` grown (or, for negative `by`, shrunk) by `by` on every side.
-fn grown(b: &Aabb, by: f32) -> Aabb {
-    Aabb {
-        min: b.min - by,
-        max: b.max + by,
-    }
-}
-
-/// The eight corners of a box.
-fn corners(b: &Aabb) -> [Vec3; 8] {
-    std::array::from_fn(|i| {
-        Vec3::new(
-            if i & 1 == 0 { b.min.x } else { b.max.x },
-            if i & 2 == 0 { b.min.y } else { b.max.y },
-            if i & 4 == 0 { b.min.z } else { b.max.z },
-        )
-    })
-}
-
-impl Visibility for Shadows<'_> {
-    /// With the shaft the convex hull of the (lifted) point `p` and the
-    /// node's box `N`:
-    ///
-    /// * `Visible` when no building, grown by [`MARGIN`], meets the bounding
-    ///   box of any of [`SHAFT_PIECES`] slices of the shaft. The points
-    ///   `(1 - t) p + t q` (`q` in `N`) with `t` in `[a, b]` lie in the
-    ///   bounding box of the two boxes `(1 - a) p + a N` and `(1 - b) p + b N`
-    ///   (each coordinate is linear in `t`), so the slices' boxes cover the
-    ///   shaft, much more tightly than one box when it runs diagonally.
-    /// * `Occluded` when the segments to all eight corners of `N` meet one
-    ///   building shrunk by [`MARGIN`]. For a convex occluder `B` the set
-    ///   `{q : [p, q] meets B} = {p + s (b - p) : b in B, s >= 1}` is convex,
-    ///   so it then holds the corners' convex hull, `N`: every light's shadow
-    ///   ray is blocked. Only buildings on the segment to the centre of `N`
-    ///   can qualify, so only those are tried.
-    /// * `Partial` otherwise.
-    fn classify(&mut self, point: Vec3, node: &NodeBounds) -> Coverage {
-        let apex = point + self.lift;
-        let bvh = &self.city.bvh;
-        let buildings = &self.city.buildings;
-        let slice = |t: f32| Aabb {
-            min: apex.lerp(node.aabb.min, t),
-            max: apex.lerp(node.aabb.max, t),
-        };
-        let pieces: [Aabb; SHAFT_PIECES] = std::array::from_fn(|k| {
-            let a = slice(k as f32 / SHAFT_PIECES as f32);
-            let b = slice((k + 1) as f32 / SHAFT_PIECES as f32);
-            grown(&union(a, b), MARGIN)
-        });
-        let shaft = pieces[1..].iter().fold(pieces[0], |a, &b| union(a, b));
-        let near = |b: &Aabb| overlaps(b, &shaft) && pieces.iter().any(|piece| overlaps(b, piece));
-        if !bvh.any(near, |i| near(&buildings[i].bounds)) {
-            return self.answer(Coverage::Visible);
-        }
-        let to_centre = Segment::new(apex, 0.5 * (node.aabb.min + node.aabb.max));
-        let to_corners = corners(&node.aabb).map(|c| Segment::new(apex, c));
-        let blocks_all = |i: usize| {
-            let core = grown(&buildings[i].bounds, -MARGIN);
-            core.min.cmple(core.max).all()
-                && to_centre.hits(&core)
-                && to_corners.iter().all(|s| s.hits(&core))
-        };
-        self.answer(if bvh.any(|b| to_centre.hits(b), blocks_all) {
-            Coverage::Occluded
-        } else {
-            Coverage::Partial
-        })
-    }
-
-    /// One shadow ray: the segment from the lifted point to the light.
-    fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
-        let ray = Segment::new(point + self.lift, light);
-        let buildings = &self.city.buildings;
-        !self
-            .city
-            .bvh
-            .any(|b| ray.hits(b), |i| ray.hits(&buildings[i].bounds))
-    }
-}
 
 fn main() -> Result<(), Box<dyn Error>> {
     let options = Options::parse(Options {
@@ -225,11 +77,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         options.height,
     );
     let hits = city.trace(&camera);
-    let shadows = |h: &Hit| Shadows {
-        city: &city,
-        lift: h.normal * SHADOW_OFFSET,
-        answers: [0; 3],
-    };
+    let shadows = |h: &Hit| Shadows::new(&city, h.normal);
 
     // Unit albedo: Lambert is linear in kd, so each pixel's albedo multiplies
     // the radiance (and its bound) afterwards.

@@ -5,6 +5,9 @@
 //! the night-city scene that `city` and `shadows` render is in `city.rs`
 //! beside it.
 
+// Shared by several examples, each of which uses a part.
+#![allow(dead_code)]
+
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};

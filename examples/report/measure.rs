@@ -21,6 +21,18 @@ pub struct Sample {
     /// evaluations for cuts, samples for Monte Carlo, lights for the exact
     /// sum).
     pub cost: u32,
+    /// Visibility work in an occluded scene: shadow rays (point-to-point
+    /// queries) and node classifications.
+    pub queries: Option<Queries>,
+}
+
+/// Visibility queries of one shading point.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Queries {
+    /// Shadow rays: point-to-point visibility queries.
+    pub shadow_rays: u32,
+    /// Warnock-style classifications of a node's box.
+    pub classify: u32,
 }
 
 /// Time and accuracy of one configuration over a set of shading points.
@@ -37,6 +49,9 @@ pub struct Measurement {
     pub bound: Option<(f64, f64)>,
     /// Mean cost per point.
     pub mean_cost: f64,
+    /// Mean shadow rays and mean classifications per point, in occluded
+    /// scenes.
+    pub queries: Option<(f64, f64)>,
 }
 
 /// Relative error in the largest channel: `max_k |estimate_k - exact_k| /
@@ -92,14 +107,27 @@ pub fn measure(
             )
         }),
         mean_cost: samples.iter().map(|s| f64::from(s.cost)).sum::<f64>() / n,
+        queries: samples
+            .iter()
+            .map(|s| s.queries)
+            .collect::<Option<Vec<Queries>>>()
+            .map(|q| {
+                let mean =
+                    |f: fn(&Queries) -> u32| q.iter().map(|x| f64::from(f(x))).sum::<f64>() / n;
+                (mean(|x| x.shadow_rays), mean(|x| x.classify))
+            }),
     }
 }
 
 /// The methods compared by the report.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Method {
-    /// (a) The exact sum, vectorized `f32` structure-of-arrays.
+    /// (a) The exact sum, vectorized `f32` structure-of-arrays (unoccluded
+    /// scenes).
     ExactSoa,
+    /// (a) The exact shadowed sum: one shadow ray per light above the
+    /// tangent plane (occluded scenes).
+    ExactShadowed,
     /// (b) The crate's cut with the paper's first-order bound, relative
     /// thresholds.
     TreePaper,
@@ -107,36 +135,43 @@ pub enum Method {
     TreeRelative,
     /// (c) The crate's cut with its tightest bound, absolute thresholds.
     TreeAbsolute,
-    /// (d) Lightcuts-style per-node criterion (not certified).
-    Lightcuts,
+    /// (d) The crate's cut with Lightcuts' per-node criterion
+    /// (`Threshold::per_node`): bound reported, not held to the threshold.
+    PerNode,
     /// (e) Monte Carlo light sampling proportional to power.
     PowerSampling,
     /// (f) Importance sampling down the light tree.
     TreeSampling,
+    /// (g) Ward 1991 adaptive shadow testing (occluded scenes).
+    Ward,
 }
 
 impl Method {
     /// Every method, in plotting order.
-    pub const ALL: [Method; 7] = [
+    pub const ALL: [Method; 9] = [
         Method::ExactSoa,
+        Method::ExactShadowed,
         Method::TreePaper,
         Method::TreeRelative,
         Method::TreeAbsolute,
-        Method::Lightcuts,
+        Method::PerNode,
         Method::PowerSampling,
         Method::TreeSampling,
+        Method::Ward,
     ];
 
     /// Identifier used in the CSV files.
     pub fn id(self) -> &'static str {
         match self {
             Method::ExactSoa => "exact-soa",
+            Method::ExactShadowed => "exact-shadowed",
             Method::TreePaper => "tree-paper-bound",
             Method::TreeRelative => "tree-tight-relative",
             Method::TreeAbsolute => "tree-tight-absolute",
-            Method::Lightcuts => "lightcuts",
+            Method::PerNode => "tree-per-node",
             Method::PowerSampling => "mc-power",
             Method::TreeSampling => "mc-tree",
+            Method::Ward => "ward-adaptive",
         }
     }
 
@@ -144,13 +179,20 @@ impl Method {
     pub fn label(self) -> &'static str {
         match self {
             Method::ExactSoa => "(a) exact sum, f32 SIMD",
+            Method::ExactShadowed => "(a) exact shadowed sum, 1 ray per light",
             Method::TreePaper => "(b) tree, paper's bound, relative t",
             Method::TreeRelative => "(c) tree, tight bound, relative t",
             Method::TreeAbsolute => "(c) tree, tight bound, absolute t",
-            Method::Lightcuts => "(d) Lightcuts criterion (not certified)",
+            Method::PerNode => "(d) tree, per-node t (Lightcuts)",
             Method::PowerSampling => "(e) MC, power sampling",
             Method::TreeSampling => "(f) MC, light-tree sampling",
+            Method::Ward => "(g) Ward 1991 adaptive shadow testing",
         }
+    }
+
+    /// The reference-quality baseline speed-ups are measured against.
+    pub fn is_exact(self) -> bool {
+        matches!(self, Method::ExactSoa | Method::ExactShadowed)
     }
 
     /// The crate's certified configurations with the best bound: what
@@ -177,7 +219,8 @@ pub struct Record {
 
 /// Header of `errors.csv` and `scaling.csv`.
 pub const CSV_HEADER: &str = "scene,lights,method,parameter,time_per_point_us,\
-mean_rel_error,max_rel_error,mean_rel_bound,max_rel_bound,mean_cost";
+mean_rel_error,max_rel_error,mean_rel_bound,max_rel_bound,mean_cost,\
+mean_shadow_rays,mean_classify_queries";
 
 impl Record {
     /// The record as a CSV line (without newline).
@@ -187,8 +230,12 @@ impl Record {
             Some((mean, max)) => (format!("{mean:.6e}"), format!("{max:.6e}")),
             None => (String::new(), String::new()),
         };
+        let (rays, classify) = match m.queries {
+            Some((rays, classify)) => (format!("{rays:.1}"), format!("{classify:.1}")),
+            None => (String::new(), String::new()),
+        };
         format!(
-            "{},{},{},{},{:.4},{:.6e},{:.6e},{},{},{:.1}",
+            "{},{},{},{},{:.4},{:.6e},{:.6e},{},{},{:.1},{},{}",
             self.scene,
             self.lights,
             self.method.id(),
@@ -198,7 +245,9 @@ impl Record {
             m.max_error,
             mean_bound,
             max_bound,
-            m.mean_cost
+            m.mean_cost,
+            rays,
+            classify
         )
     }
 }

@@ -116,7 +116,10 @@ fn draw_panel(
                     .draw_series(LineSeries::new(points.clone(), line))?
                     .label(&series.label)
                     .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                        // A line and the series' filled circle.
+                        EmptyElement::at((x, y))
+                            + PathElement::new(vec![(0, 0), (20, 0)], colour.stroke_width(2))
+                            + Circle::new((10, 0), MARKER_SIZE - 1, colour.filled())
                     });
                 chart.draw_series(
                     points
@@ -129,10 +132,11 @@ fn draw_panel(
                     .draw_series(DashedLineSeries::new(points.clone(), 6, 4, line))?
                     .label(&series.label)
                     .legend(move |(x, y)| {
-                        PathElement::new(
-                            vec![(x, y), (x + 8, y), (x + 12, y), (x + 20, y)],
-                            colour.stroke_width(1),
-                        )
+                        // Two dashes and the series' triangle marker.
+                        EmptyElement::at((x, y))
+                            + PathElement::new(vec![(0, 0), (6, 0)], colour.stroke_width(2))
+                            + PathElement::new(vec![(14, 0), (20, 0)], colour.stroke_width(2))
+                            + TriangleMarker::new((10, 0), MARKER_SIZE, colour)
                     });
                 chart.draw_series(
                     points

@@ -19,8 +19,12 @@
 //! they stay unbiased for every light with a non-zero probability, which is
 //! every light above the tangent plane (all of them in the report's scenes,
 //! where lights are above the floor and the eye is too).
+//!
+//! In an occluded scene each sample with a non-zero unoccluded contribution
+//! casts one shadow ray (`visible`) and counts only if it is unblocked:
+//! neither sampler knows about occluders when it chooses, as in pbrt-v4.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use manylights::{Cone, LightTree, Node, PointLight, Shader, Surface};
 
 use crate::scenes::Rng;
@@ -89,20 +93,24 @@ impl PowerSampler {
         Self { bins, scaled }
     }
 
-    /// Mean of `samples` estimates `f(x_i) / p_i`.
+    /// Mean of `samples` estimates `V_i f(x_i) / p_i`, with `visible` the
+    /// shadow ray to a light position; returns the estimate and the number
+    /// of shadow rays cast.
     pub fn estimate<S: Shader>(
         &self,
         shader: &S,
         surface: &Surface,
         rng: &mut Rng,
         samples: u32,
-    ) -> DVec3 {
+        mut visible: impl FnMut(Vec3) -> bool,
+    ) -> (DVec3, u32) {
         if self.bins.is_empty() {
-            return DVec3::ZERO;
+            return (DVec3::ZERO, 0);
         }
         let frame = shader.frame(surface);
         let n = self.bins.len();
         let mut sum = DVec3::ZERO;
+        let mut rays = 0;
         for _ in 0..samples {
             let u = rng.f64() * n as f64;
             let i = (u as usize).min(n - 1);
@@ -113,14 +121,20 @@ impl PowerSampler {
                 bin.alias as usize
             };
             let light = &self.scaled[j];
-            sum += shader.eval(
+            let f = shader.eval(
                 &frame,
                 surface,
                 light.position.as_dvec3(),
                 light.intensity.as_dvec3(),
             );
+            if f.max_element() > 0.0 {
+                rays += 1;
+                if visible(light.position) {
+                    sum += f;
+                }
+            }
         }
-        sum / f64::from(samples)
+        (sum / f64::from(samples), rays)
     }
 }
 
@@ -175,16 +189,19 @@ impl<'t> TreeSampler<'t> {
         Self { tree }
     }
 
-    /// Mean of `samples` single-path estimates.
+    /// Mean of `samples` single-path estimates, with `visible` the shadow
+    /// ray to a light position; returns the estimate and the number of
+    /// shadow rays cast.
     pub fn estimate<S: Shader>(
         &self,
         shader: &S,
         surface: &Surface,
         rng: &mut Rng,
         samples: u32,
-    ) -> DVec3 {
+        mut visible: impl FnMut(Vec3) -> bool,
+    ) -> (DVec3, u32) {
         if self.tree.is_empty() {
-            return DVec3::ZERO;
+            return (DVec3::ZERO, 0);
         }
         let frame = shader.frame(surface);
         let nodes = self.tree.nodes();
@@ -198,6 +215,7 @@ impl<'t> TreeSampler<'t> {
             )
         };
         let mut sum = DVec3::ZERO;
+        let mut rays = 0;
         'samples: for _ in 0..samples {
             let mut node = &nodes[0];
             let mut pdf = 1.0;
@@ -229,17 +247,20 @@ impl<'t> TreeSampler<'t> {
                 let f = eval(light);
                 let c = f.max_element();
                 if c > 0.0 {
-                    chosen = Some((f, c));
+                    chosen = Some((light.position, f, c));
                     if u < c {
                         break;
                     }
                     u -= c;
                 }
             }
-            if let Some((f, c)) = chosen {
-                sum += f * (total / (c * pdf));
+            if let Some((position, f, c)) = chosen {
+                rays += 1;
+                if visible(position) {
+                    sum += f * (total / (c * pdf));
+                }
             }
         }
-        sum / f64::from(samples)
+        (sum / f64::from(samples), rays)
     }
 }
