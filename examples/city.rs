@@ -1,23 +1,28 @@
 //! A city at night lit by 100,000 point lights: street lamps along a grid of
 //! streets and lit windows on box buildings, seen from above at an angle.
 //!
-//! Every visible pixel (one primary ray, no shadows) is shaded twice with the
-//! Lambert model: by the light tree at a relative threshold on its certified
-//! error bound, and by the exact sum over every light. The example writes
-//! both images and an enhanced-contrast difference image, prints the times,
-//! the errors actually made against the certified bound, and checks that the
+//! Every visible pixel (one primary ray) is shaded twice with the Lambert
+//! model: by the light tree at a relative threshold on its certified error
+//! bound, and by the exact sum over every light. The example writes both
+//! images and an enhanced-contrast difference image, prints the times, the
+//! errors actually made against the certified bound, and checks that the
 //! bound holds at every pixel.
+//!
+//! With `--shadows` the buildings cast shadows: a smaller city (20,000
+//! lights), the host's conservative classifier ([`city::Shadows`]) answering
+//! the tree's Warnock-style questions and casting its shadow rays, against
+//! the exact shadowed sum that casts one shadow ray per light and pixel; the
+//! table adds the visibility queries.
 //!
 //! ```text
 //! cargo run --release --example city
+//! cargo run --release --example city -- --shadows
 //! cargo run --release --example city -- --lights 1000000 --width 160 --height 90 \
 //!     --threshold 0.02 --out out
 //! ```
 //!
-//! The defaults (100,000 lights, 320x180) take about a minute; the exact
-//! render's time grows with lights times pixels.
-//!
-//! Output: `out/city_tree.png`, `out/city_exact.png`, `out/city_diff.png`.
+//! Output: `out/city_{tree,exact,diff}.png`, or `out/shadows_{tree,exact,diff}.png`
+//! with `--shadows`.
 
 #[path = "common/city.rs"]
 mod city;
@@ -28,51 +33,81 @@ use std::error::Error;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use city::{City, Hit};
-use common::{Camera, ErrorStats, Options, exposure, mean_per_pixel};
+use city::{City, Hit, Shadows};
+use common::{Camera, ErrorStats, Options, exposure, mean_per_pixel, print_comparison, print_row};
 use glam::{DVec3, Vec3};
 use manylights::{Lambert, LightTree, ShadeError, ShadeResult, Threshold};
 use rayon::prelude::*;
 
-/// Blocks along each side of the city (2 km at 40 m per block).
-const BLOCKS: u32 = 50;
-/// Default number of lights.
-const DEFAULT_LIGHTS: usize = 100_000;
-/// Default image size: both renders together take about a minute on two
-/// busy cores.
-const DEFAULT_WIDTH: u32 = 320;
-const DEFAULT_HEIGHT: u32 = 180;
+/// One of the two scenes the example renders.
+struct Setup {
+    /// Blocks along each side of the city (40 m each).
+    blocks: u32,
+    /// Default number of lights and image size.
+    lights: usize,
+    width: u32,
+    height: u32,
+    camera_eye: Vec3,
+    camera_target: Vec3,
+    camera_fov_degrees: f32,
+    /// Prefix of the image files, and the table's title.
+    name: &'static str,
+    title: &'static str,
+}
+
+/// No shadows: a 2 km city; both renders take well under a minute.
+const LIT: Setup = Setup {
+    blocks: 50,
+    lights: 100_000,
+    width: 320,
+    height: 180,
+    camera_eye: Vec3::new(760.0, 120.0, 160.0),
+    camera_target: Vec3::new(870.0, 640.0, 0.0),
+    camera_fov_degrees: 45.0,
+    name: "city",
+    title: "city at night, Lambert, no shadows",
+};
+
+/// Shadows: a smaller city, since the exact shadowed sum casts lights x
+/// pixels shadow rays (about a minute on two cores).
+const SHADOWED: Setup = Setup {
+    blocks: 16,
+    lights: 20_000,
+    width: 256,
+    height: 144,
+    camera_eye: Vec3::new(250.0, -60.0, 160.0),
+    camera_target: Vec3::new(330.0, 260.0, 0.0),
+    camera_fov_degrees: 50.0,
+    name: "shadows",
+    title: "city at night with shadows, Lambert",
+};
+
 /// Default relative threshold of the certified bound (1%).
 const DEFAULT_THRESHOLD: f64 = 0.01;
-/// Default output directory.
-const DEFAULT_OUT: &str = "out";
-
-/// The camera hovers above the southern streets, looking north across the
-/// city to its far edge.
-const CAMERA_EYE: Vec3 = Vec3::new(760.0, 120.0, 160.0);
-const CAMERA_TARGET: Vec3 = Vec3::new(870.0, 640.0, 0.0);
-const CAMERA_FOV_DEGREES: f32 = 45.0;
 /// Percentile of the exact image that the exposure maps to white.
 const EXPOSURE_PERCENTILE: f64 = 0.995;
 
 fn main() -> Result<(), Box<dyn Error>> {
+    let shadows = std::env::args().any(|a| a == "--shadows");
+    let setup = if shadows { SHADOWED } else { LIT };
     let options = Options::parse(Options {
-        lights: DEFAULT_LIGHTS,
-        width: DEFAULT_WIDTH,
-        height: DEFAULT_HEIGHT,
+        lights: setup.lights,
+        width: setup.width,
+        height: setup.height,
         threshold: DEFAULT_THRESHOLD,
-        out: PathBuf::from(DEFAULT_OUT),
+        out: PathBuf::from("out"),
+        shadows,
     });
-    let city = City::new(BLOCKS, options.lights);
+    let city = City::new(setup.blocks, options.lights);
 
     let start = Instant::now();
     let tree = LightTree::build(&city.lights)?;
     let build_time = start.elapsed();
 
     let camera = Camera::new(
-        CAMERA_EYE,
-        CAMERA_TARGET,
-        CAMERA_FOV_DEGREES,
+        setup.camera_eye,
+        setup.camera_target,
+        setup.camera_fov_degrees,
         options.width,
         options.height,
     );
@@ -86,18 +121,28 @@ fn main() -> Result<(), Box<dyn Error>> {
     let threshold = Threshold::relative(options.threshold);
     let row = options.width as usize;
 
+    // The tree, per pixel: with shadows through the host's visibility (and
+    // its answers counted), without through `shade`, which asks nothing.
     let start = Instant::now();
     let mut tree_results: Vec<Option<ShadeResult>> = vec![None; hits.len()];
+    let mut answers = vec![[0u32; 3]; hits.len()];
     tree_results
         .par_chunks_mut(row)
+        .zip(answers.par_chunks_mut(row))
         .zip(hits.par_chunks(row))
         .try_for_each_init(
             || tree.shading(shader),
-            |shading, (results, hits)| -> Result<(), ShadeError> {
-                for (result, hit) in results.iter_mut().zip(hits) {
-                    *result = hit
-                        .map(|h| shading.shade(h.point, h.normal, threshold))
-                        .transpose()?;
+            |shading, ((results, answers), hits)| -> Result<(), ShadeError> {
+                for ((result, answer), hit) in results.iter_mut().zip(answers).zip(hits) {
+                    let Some(h) = hit else { continue };
+                    *result = Some(if shadows {
+                        let mut host = Shadows::new(&city, h.normal);
+                        let r = shading.shade_occluded(h.point, h.normal, threshold, &mut host)?;
+                        *answer = host.answers;
+                        r
+                    } else {
+                        shading.shade(h.point, h.normal, threshold)?
+                    });
                 }
                 Ok(())
             },
@@ -107,69 +152,53 @@ fn main() -> Result<(), Box<dyn Error>> {
     let start = Instant::now();
     let exact_shading = tree.shading(shader);
     let exact: Vec<Option<DVec3>> = hits
-        .par_chunks(row)
-        .flat_map_iter(|hits| {
-            hits.iter()
-                .map(|hit| {
-                    hit.map(|h| exact_shading.shade_exact(h.point, h.normal))
-                        .transpose()
-                })
-                .collect::<Vec<_>>()
+        .par_iter()
+        .map(|hit| {
+            hit.map(|h| {
+                if shadows {
+                    let mut host = Shadows::new(&city, h.normal);
+                    exact_shading.shade_exact_occluded(h.point, h.normal, &mut host)
+                } else {
+                    exact_shading.shade_exact(h.point, h.normal)
+                }
+            })
+            .transpose()
         })
         .collect::<Result<_, _>>()?;
     let exact_time = start.elapsed();
 
     let stats = ErrorStats::new(&tree_results, &exact);
     let pixels = hits.iter().flatten().count();
-    println!("city at night, Lambert, no shadows");
-    println!("  lights                        {:>12}", tree.len());
-    println!(
-        "  image                         {:>12}",
-        format!("{}x{}", options.width, options.height)
-    );
-    println!("  shaded pixels                 {pixels:>12}");
-    println!("  threshold (relative)          {:>12}", options.threshold);
-    println!(
-        "  tree build                    {:>10.3} s",
-        build_time.as_secs_f64()
-    );
-    println!(
-        "  primary rays                  {:>10.3} s",
-        trace_time.as_secs_f64()
-    );
-    println!(
-        "  tree render                   {:>10.3} s",
-        tree_time.as_secs_f64()
-    );
-    println!(
-        "  exact render                  {:>10.3} s",
-        exact_time.as_secs_f64()
-    );
-    println!(
-        "  speed-up                      {:>11.2}x",
-        exact_time.as_secs_f64() / tree_time.as_secs_f64()
-    );
-    println!(
-        "  mean relative error           {:>12.3e}",
-        stats.mean_relative
-    );
-    println!(
-        "  max relative error            {:>12.3e}",
-        stats.max_relative
-    );
-    println!(
-        "  mean certified bound / value  {:>12.3e}",
-        stats.mean_bound_relative
-    );
-    println!(
-        "  nodes evaluated per pixel     {:>12.1}",
-        mean_per_pixel(&tree_results, |r| r.nodes_evaluated)
-    );
-    println!(
-        "  lights evaluated per pixel    {:>12.1}",
-        mean_per_pixel(&tree_results, |r| r.lights_evaluated)
-    );
-    println!("  pixels violating the bound    {:>12}", stats.violations);
+    println!("{}", setup.title);
+    print_row("lights", tree.len());
+    if shadows {
+        print_row("buildings", city.buildings.len());
+    }
+    print_row("image", format!("{}x{}", options.width, options.height));
+    print_row("shaded pixels", pixels);
+    print_row("threshold (relative)", options.threshold);
+    print_row("primary rays", format!("{:.3} s", trace_time.as_secs_f64()));
+    print_comparison(build_time, tree_time, exact_time, &tree_results, &stats);
+    if shadows {
+        let per_pixel =
+            |f: fn(&ShadeResult) -> u32| format!("{:.1}", mean_per_pixel(&tree_results, f));
+        print_row(
+            "classify queries per pixel",
+            per_pixel(|r| r.classify_queries),
+        );
+        for (slot, name) in ["visible", "occluded", "partial"].iter().enumerate() {
+            let total: u64 = answers.iter().map(|a| u64::from(a[slot])).sum();
+            print_row(
+                &format!("  answered {name}"),
+                format!("{:.1}", total as f64 / pixels.max(1) as f64),
+            );
+        }
+        print_row(
+            "shadow rays per pixel, tree",
+            per_pixel(|r| r.point_queries),
+        );
+        print_row("shadow rays per pixel, exact", tree.len());
+    }
 
     let albedo = |hit: &Option<Hit>| hit.map_or(DVec3::ZERO, |h| h.albedo.as_dvec3());
     let tree_image: Vec<DVec3> = tree_results
@@ -185,7 +214,8 @@ fn main() -> Result<(), Box<dyn Error>> {
     let exposure = exposure(&exact_image, EXPOSURE_PERCENTILE);
     std::fs::create_dir_all(&options.out)?;
     let (w, h) = (options.width, options.height);
-    let paths = ["city_tree.png", "city_exact.png", "city_diff.png"].map(|f| options.out.join(f));
+    let paths =
+        ["tree", "exact", "diff"].map(|f| options.out.join(format!("{}_{f}.png", setup.name)));
     common::write_radiance(&paths[0], w, h, &tree_image, exposure)?;
     common::write_radiance(&paths[1], w, h, &exact_image, exposure)?;
     common::write_difference(

@@ -20,7 +20,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use common::{
-    Camera, ErrorStats, Options, exposure, mean_per_pixel, write_difference, write_radiance,
+    Camera, ErrorStats, Options, exposure, print_comparison, print_row, write_difference,
+    write_radiance,
 };
 use glam::{DVec3, Vec3};
 use manylights::{Combined, Lambert, LightTree, Phong, PointLight, ShadeResult, Threshold};
@@ -136,6 +137,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         height: DEFAULT_HEIGHT,
         threshold: DEFAULT_THRESHOLD,
         out: PathBuf::from("out"),
+        shadows: false,
     });
     let lights = strings(options.lights);
     let start = Instant::now();
@@ -184,48 +186,11 @@ fn main() -> Result<(), Box<dyn Error>> {
     let exact_time = start.elapsed();
 
     let stats = ErrorStats::new(&tree_results, &exact);
-    let speed_up = exact_time.as_secs_f64() / tree_time.as_secs_f64();
     println!("light strings over a glossy floor and spheres, Lambert + Phong (e = {EXPONENT})");
-    println!("  lights                        {:>12}", tree.len());
-    println!(
-        "  image                         {:>12}",
-        format!("{}x{}", options.width, options.height)
-    );
-    println!("  threshold (relative)          {:>12}", options.threshold);
-    println!(
-        "  tree build                    {:>10.3} s",
-        build_time.as_secs_f64()
-    );
-    println!(
-        "  tree render                   {:>10.3} s",
-        tree_time.as_secs_f64()
-    );
-    println!(
-        "  exact render                  {:>10.3} s",
-        exact_time.as_secs_f64()
-    );
-    println!("  speed-up                      {speed_up:>11.2}x");
-    println!(
-        "  mean relative error           {:>12.3e}",
-        stats.mean_relative
-    );
-    println!(
-        "  max relative error            {:>12.3e}",
-        stats.max_relative
-    );
-    println!(
-        "  mean certified bound / value  {:>12.3e}",
-        stats.mean_bound_relative
-    );
-    println!(
-        "  nodes evaluated per pixel     {:>12.1}",
-        mean_per_pixel(&tree_results, |r| r.nodes_evaluated)
-    );
-    println!(
-        "  lights evaluated per pixel    {:>12.1}",
-        mean_per_pixel(&tree_results, |r| r.lights_evaluated)
-    );
-    println!("  pixels violating the bound    {:>12}", stats.violations);
+    print_row("lights", tree.len());
+    print_row("image", format!("{}x{}", options.width, options.height));
+    print_row("threshold (relative)", options.threshold);
+    print_comparison(build_time, tree_time, exact_time, &tree_results, &stats);
 
     let black = |v: Option<DVec3>| v.unwrap_or(DVec3::ZERO);
     let tree_img: Vec<DVec3> = tree_results

@@ -37,7 +37,7 @@
 //!     absolute thresholds (absolute ones as fractions of the scene's median
 //!     exact radiance; 0 is the exact limit of the cut). In the occluded
 //!     scene, the same thresholds through `shade_occluded` with the
-//!     conservative classifier of the `shadows` example.
+//!     conservative classifier of `city --shadows`.
 //! (d) The crate's cut with Lightcuts' per-node criterion
 //!     (`Threshold::per_node`, Walter et al. 2005): same tree and tight
 //!     bounds, stop when the largest single node error is below t times the
@@ -303,7 +303,7 @@ or shade_exact_occluded in the occluded scene):
     (unoccluded terms vectorized the same way).
 (b) the crate's cut with the paper's first-order bound (BoundKind::Paper), relative thresholds.
 (c) the crate's cut with its tightest bound (default), relative and absolute thresholds;
-    occluded scene: shade_occluded with the shadows example's conservative classifier.
+    occluded scene: shade_occluded with the conservative classifier of `city --shadows`.
 (d) the crate's cut with Lightcuts' per-node criterion (Threshold::per_node): refine the node of
     largest error until it is below t x estimate (t = 5%..0.5% as in the brief, plus 0.2% and
     0.1% to reach 1% max error; 2%..0.01% in the occluded scene); certified bound reported

@@ -1,4 +1,4 @@
-//! The night-city scene of the `city`, `shadows` and `report` examples:
+//! The night-city scene of the `city` and `report` examples:
 //! street lamps along a grid of streets, lit windows, box buildings on a
 //! ground plane, ray casting through a small bounding-volume hierarchy over
 //! the buildings, and `Shadows`, the host's conservative visibility

@@ -2,7 +2,7 @@
 //! statistics against the exact sum, tone mapping and PNG output.
 //!
 //! Included from each example with `#[path = "common/mod.rs"] mod common;`;
-//! the night-city scene that `city` and `shadows` render is in `city.rs`
+//! the night-city scene that `city` renders is in `city.rs`
 //! beside it.
 
 // Shared by several examples, each of which uses a part.
@@ -32,6 +32,9 @@ pub struct Options {
     pub threshold: f64,
     /// `--out DIR`: where the PNG images go.
     pub out: PathBuf,
+    /// `--shadows` (no value): render with occluders, where an example
+    /// offers it.
+    pub shadows: bool,
 }
 
 impl Options {
@@ -41,6 +44,10 @@ impl Options {
         let mut options = defaults;
         let mut args = std::env::args().skip(1);
         while let Some(flag) = args.next() {
+            if flag == "--shadows" {
+                options.shadows = true;
+                continue;
+            }
             let value = args.next().unwrap_or_default();
             let ok = match flag.as_str() {
                 "--lights" => value.parse().map(|v| options.lights = v).is_ok(),
@@ -56,7 +63,7 @@ impl Options {
             if !ok || options.width == 0 || options.height == 0 || options.threshold < 0.0 {
                 eprintln!(
                     "bad argument `{flag} {value}`\n\
-                     usage: [--lights N] [--width W] [--height H] [--threshold T] [--out DIR]"
+                     usage: [--lights N] [--width W] [--height H] [--threshold T] [--out DIR] [--shadows]"
                 );
                 std::process::exit(2);
             }
@@ -287,4 +294,51 @@ pub fn write_difference_linear(
         })
         .collect();
     write_png(path, width, height, &rgb)
+}
+
+// ---------------------------------------------------------------------------
+// The printed table
+// ---------------------------------------------------------------------------
+
+/// Prints one row of an example's table: a label and a right-aligned value.
+pub fn print_row(label: &str, value: impl std::fmt::Display) {
+    println!("  {label:<30}{value:>12}");
+}
+
+/// Prints the rows every example shares: build and render times, the
+/// speed-up, the errors made against the exact sum, the certified bound, the
+/// work per pixel, and the pixels breaking the bound (there should be none).
+pub fn print_comparison(
+    build: std::time::Duration,
+    tree: std::time::Duration,
+    exact: std::time::Duration,
+    results: &[Option<ShadeResult>],
+    stats: &ErrorStats,
+) {
+    print_row("tree build", format!("{:.3} s", build.as_secs_f64()));
+    print_row("tree render", format!("{:.3} s", tree.as_secs_f64()));
+    print_row("exact render", format!("{:.3} s", exact.as_secs_f64()));
+    print_row(
+        "speed-up",
+        format!("{:.2}x", exact.as_secs_f64() / tree.as_secs_f64()),
+    );
+    print_row(
+        "mean relative error",
+        format!("{:.3e}", stats.mean_relative),
+    );
+    print_row("max relative error", format!("{:.3e}", stats.max_relative));
+    print_row(
+        "mean certified bound / value",
+        format!("{:.3e}", stats.mean_bound_relative),
+    );
+    let per_pixel = |f: fn(&ShadeResult) -> u32| format!("{:.1}", mean_per_pixel(results, f));
+    print_row(
+        "nodes evaluated per pixel",
+        per_pixel(|r| r.nodes_evaluated),
+    );
+    print_row(
+        "lights evaluated per pixel",
+        per_pixel(|r| r.lights_evaluated),
+    );
+    print_row("pixels violating the bound", stats.violations);
 }

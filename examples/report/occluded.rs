@@ -2,14 +2,12 @@
 //! that only make sense with occluders: the exact shadowed sum and Ward's
 //! adaptive shadow testing.
 //!
-//! * The scene is the night city of the `shadows` example
+//! * The scene is the night city of `city --shadows`
 //!   (`examples/common/city.rs`: street lamps, lit windows, box buildings,
 //!   a BVH over them), with shading points on the streets and on the
 //!   façades instead of a camera's pixels.
-//! * [`Shadows`] is that example's host: the same conservative Warnock-style
-//!   classifier and the same shadow rays. It is a copy of the one in
-//!   `examples/shadows.rs` (a binary, which cannot be included), without
-//!   its answer counters; keep the two in step.
+//! * The host is that example's `Shadows` (in `common/city.rs`): the same
+//!   conservative Warnock-style classifier and the same shadow rays.
 //! * [`ShadowLights::exact`] is "standard ray tracing" with shadows: every
 //!   light's contribution, one shadow ray for each light that can contribute
 //!   (above the tangent plane). It equals the crate's `shade_exact_occluded`
@@ -41,7 +39,7 @@ use manylights::{PointLight, Visibility};
 use crate::city::City;
 use crate::scenes::{Material, Rng, Scene, ShadingPoint};
 
-/// Blocks along each side of the city (as in the `shadows` example).
+/// Blocks along each side of the city (as in `city --shadows`).
 pub const BLOCKS: u32 = 16;
 /// Share of the shading points on the ground; the rest are on façades.
 const GROUND_SHARE: f64 = 0.5;
@@ -57,7 +55,7 @@ pub struct Occluded {
     pub city: City,
 }
 
-/// `city-shadows`: the `shadows` example's city of [`BLOCKS`] x [`BLOCKS`]
+/// `city-shadows`: `city --shadows`'s city of [`BLOCKS`] x [`BLOCKS`]
 /// blocks with `lights` lights (80% street lamps, 20% lit windows), and
 /// `points` shading points, half on the streets (uniform over the city,
 /// outside the buildings) and half on the buildings' walls (a uniform
@@ -114,7 +112,7 @@ pub fn city_shadows(lights: usize, points: usize, seed: u64) -> Occluded {
     let scene = Scene {
         name: "city-shadows",
         description: format!(
-            "the shadows example's city with occluders: {} lights (street lamps, a fifth lit \
+            "the city of `city --shadows` with occluders: {} lights (street lamps, a fifth lit \
              windows), {} box buildings, {BLOCKS}x{BLOCKS} blocks, ~{}x{} units; \
              points half on the streets, half on the façades; reference = exact shadowed sum \
              (one shadow ray per light)",
