@@ -418,13 +418,8 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Every configuration of every method on one scene.
-fn sweep<S: Shader + Copy + Send + Sync>(
-    scene: &Scene,
-    cfg: &Config,
-    make: impl Fn(BoundKind) -> S,
-) -> Result<Vec<Record>, Box<dyn Error>> {
-    let (tree, build) = build_tree(scene)?;
+/// Prints a scene's heading and its tree's size and build time.
+fn print_header(scene: &Scene, tree: &LightTree, build: Duration) {
     println!("## Scene `{}`: {}", scene.name, scene.description);
     println!(
         "  tree: {} nodes, depth {}, built in {:.1} ms ({:.0} ns/light), {:.1} bytes/light",
@@ -434,6 +429,34 @@ fn sweep<S: Shader + Copy + Send + Sync>(
         build.as_secs_f64() * 1e9 / tree.len() as f64,
         tree.memory_bytes() as f64 / tree.len() as f64
     );
+}
+
+/// A closure that prints a measurement and adds it to `rows` as the
+/// scene's record.
+fn recorder<'a>(
+    scene: &'a Scene,
+    rows: &'a mut Vec<Record>,
+) -> impl FnMut(Method, String, Measurement) + 'a {
+    move |method, parameter, m| {
+        println!("  {}", describe(method, &parameter, &m));
+        rows.push(Record {
+            scene: scene.name.to_string(),
+            lights: scene.lights.len(),
+            method,
+            parameter,
+            measurement: m,
+        });
+    }
+}
+
+/// Every configuration of every method on one scene.
+fn sweep<S: Shader + Copy + Send + Sync>(
+    scene: &Scene,
+    cfg: &Config,
+    make: impl Fn(BoundKind) -> S,
+) -> Result<Vec<Record>, Box<dyn Error>> {
+    let (tree, build) = build_tree(scene)?;
+    print_header(scene, &tree, build);
     let (points, refs, dropped) = references(&tree, make(BoundKind::Tight), &scene.points);
     let points = &points;
     let median_radiance = median(refs.iter().map(|r| r.max_element()).collect());
@@ -446,16 +469,7 @@ fn sweep<S: Shader + Copy + Send + Sync>(
     );
 
     let mut rows = Vec::new();
-    let mut record = |method: Method, parameter: String, m: Measurement| {
-        println!("  {}", describe(method, &parameter, &m));
-        rows.push(Record {
-            scene: scene.name.to_string(),
-            lights: scene.lights.len(),
-            method,
-            parameter,
-            measurement: m,
-        });
-    };
+    let mut record = recorder(scene, &mut rows);
 
     let lights = scene.lights.len() as u32;
     let m = measure(&refs, cfg.budget, |i| {
@@ -549,6 +563,7 @@ fn sweep<S: Shader + Copy + Send + Sync>(
         });
         record(Method::TreeSampling, format!("n={n}"), m);
     }
+    drop(record);
     Ok(rows)
 }
 
@@ -558,15 +573,7 @@ fn sweep<S: Shader + Copy + Send + Sync>(
 fn run_occluded(occluded: &Occluded, cfg: &Config) -> Result<Vec<Record>, Box<dyn Error>> {
     let (scene, city) = (&occluded.scene, &occluded.city);
     let (tree, build) = build_tree(scene)?;
-    println!("## Scene `{}`: {}", scene.name, scene.description);
-    println!(
-        "  tree: {} nodes, depth {}, built in {:.1} ms ({:.0} ns/light), {:.1} bytes/light",
-        tree.nodes().len(),
-        tree.depth(),
-        build.as_secs_f64() * 1e3,
-        build.as_secs_f64() * 1e9 / tree.len() as f64,
-        tree.memory_bytes() as f64 / tree.len() as f64
-    );
+    print_header(scene, &tree, build);
     let shader = Lambert::new(scene.material.kd);
     let host = |pt: &ShadingPoint| Shadows::new(city, pt.normal);
     // The reference: the crate's exact shadowed sum (one shadow ray per
@@ -598,16 +605,7 @@ fn run_occluded(occluded: &Occluded, cfg: &Config) -> Result<Vec<Record>, Box<dy
     );
 
     let mut rows = Vec::new();
-    let mut record = |method: Method, parameter: String, m: Measurement| {
-        println!("  {}", describe(method, &parameter, &m));
-        rows.push(Record {
-            scene: scene.name.to_string(),
-            lights: scene.lights.len(),
-            method,
-            parameter,
-            measurement: m,
-        });
-    };
+    let mut record = recorder(scene, &mut rows);
     let lights = scene.lights.len() as u32;
 
     let mut soa = ShadowLights::new(&scene.lights, scene.material.kd);
@@ -751,6 +749,7 @@ fn run_occluded(occluded: &Occluded, cfg: &Config) -> Result<Vec<Record>, Box<dy
         });
         record(Method::Ward, format!("t={t}"), m);
     }
+    drop(record);
     Ok(rows)
 }
 
