@@ -186,12 +186,6 @@ fn box_heights(node: &Node, surface: &Surface) -> (f64, f64) {
     (middle - reach - slack, middle + reach + slack)
 }
 
-/// A unit vector orthogonal to the unit vector `n`.
-#[inline]
-pub(crate) fn any_orthogonal(n: DVec3) -> DVec3 {
-    n.any_orthonormal_vector()
-}
-
 impl Shader for Lambert {
     type Frame = ();
 
@@ -225,13 +219,15 @@ impl Shader for Lambert {
         let inv_d = cone.inv_distance;
         let scale = node.intensity * self.kd * (inv_d * inv_d);
         let sd = cone.sin_half_angle;
-        let near = 1.0 / (1.0 - sd);
         let virtual_light = scale * z.max(0.0);
         let lower = scale * (cos_lo.max(0.0) * cone.far_falloff());
         let upper = scale * (cos_hi * cone.near_falloff());
         if self.kind == BoundKind::Paper {
             return NodeBound::new(virtual_light, lower, upper);
         }
+        // D / (D - R): the nearest member's distance in units of D, inverted.
+        let inv_rho = 1.0 / (1.0 - sd);
+        let inv_rho3 = inv_rho * inv_rho * inv_rho;
         let (lowest, highest) = box_heights(node, surface);
         if highest <= 0.0 {
             // The whole box lies at or below the tangent plane.
@@ -240,7 +236,7 @@ impl Shader for Lambert {
         // A second upper bound on cos/d^2 = z/d^3 over the members:
         // (highest z in the box) / (D - R)^3, much tighter than the paper's
         // for flat clusters barely above the plane.
-        let upper = upper.min(scale * (highest * inv_d * near * near * near));
+        let upper = upper.min(scale * (highest * inv_d * inv_rho3));
 
         // Second order, in units of D. Gradient of z/r^3 at the unit axis.
         let grad = n - 3.0 * z * cone.axis;
@@ -263,17 +259,15 @@ impl Shader for Lambert {
         // at most the box's depth. Zero when the box lies above the plane,
         // and continuous as a node crosses it.
         let depth = (sd - z).min(-lowest * inv_d).max(0.0);
-        let straddle = scale * (depth / (1.0 - sd).powi(3));
+        let straddle = scale * (depth * inv_rho3);
 
         // Hessian entry bounds over the ball.
-        let rho = 1.0 - sd;
-        let inv_rho = 1.0 / rho;
         // Ratios to the nearest distance, capped at 1: |a|/r, |b|/r, |z|/r.
         let ratio = |x: f64| (x * inv_rho).min(1.0);
         let z_abs_max = z.abs() + sd;
         let (r_a, r_b, r_z) = (ratio(sin_c + sd), ratio(sd), ratio(z_abs_max));
         let (t_a, t_b, t_z) = (r_a * r_a, r_b * r_b, r_z * r_z);
-        let p4 = inv_rho.powi(4);
+        let p4 = inv_rho3 * inv_rho;
         let q = z_abs_max * p4 * inv_rho;
         let h11 = q * (15.0 * t_a - 3.0).max(3.0);
         let h22 = q * (15.0 * t_b - 3.0).max(3.0);
@@ -288,7 +282,7 @@ impl Shader for Lambert {
         let e1 = if sin_c > 0.0 {
             (cone.axis - z * n) / sin_c
         } else {
-            any_orthogonal(n)
+            n.any_orthonormal_vector()
         };
         let e2 = n.cross(e1);
         let cov = &node.covariance;
