@@ -159,8 +159,7 @@ pub(crate) fn sanitize(v: Vec3) -> DVec3 {
 
 /// `e^T S e` for the symmetric matrix stored as `[xx, yy, zz, xy, xz, yz]`.
 #[inline]
-fn quadratic_form(s: &[f32; 6], e: DVec3) -> f64 {
-    let s = s.map(f64::from);
+fn quadratic_form(s: &[f64; 6], e: DVec3) -> f64 {
     s[0] * e.x * e.x
         + s[1] * e.y * e.y
         + s[2] * e.z * e.z
@@ -219,14 +218,14 @@ impl Shader for Lambert {
         let inv_d = cone.inv_distance;
         let scale = node.intensity * self.kd * (inv_d * inv_d);
         let sd = cone.sin_half_angle;
+        // D / (D - R): the nearest member's distance in units of D, inverted.
+        let inv_rho = 1.0 / (1.0 - sd);
         let virtual_light = scale * z.max(0.0);
         let lower = scale * (cos_lo.max(0.0) * cone.far_falloff());
-        let upper = scale * (cos_hi * cone.near_falloff());
+        let upper = scale * (cos_hi * inv_rho * inv_rho);
         if self.kind == BoundKind::Paper {
             return NodeBound::new(virtual_light, lower, upper);
         }
-        // D / (D - R): the nearest member's distance in units of D, inverted.
-        let inv_rho = 1.0 / (1.0 - sd);
         let inv_rho3 = inv_rho * inv_rho * inv_rho;
         let (lowest, highest) = box_heights(node, surface);
         if highest <= 0.0 {
@@ -240,7 +239,8 @@ impl Shader for Lambert {
 
         // Second order, in units of D. Gradient of z/r^3 at the unit axis.
         let grad = n - 3.0 * z * cone.axis;
-        let grad_len = grad.length();
+        // Its Euclidean norm bounded by its 1-norm, for the rounding slack.
+        let grad_len = grad.abs().element_sum();
         let o = node.channel_offsets;
         let offsets = DVec3::new(
             grad.dot(o[0].as_dvec3()),
@@ -285,7 +285,7 @@ impl Shader for Lambert {
             n.any_orthonormal_vector()
         };
         let e2 = n.cross(e1);
-        let cov = &node.covariance;
+        let cov = &node.covariance.map(f64::from);
         let inv_d2 = inv_d * inv_d;
         let trace = node.mean_squared_radius() * inv_d2;
         let pad = f32::EPSILON as f64 * trace;
