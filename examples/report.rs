@@ -418,6 +418,31 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// A Monte Carlo estimator measured at every sample count, with the same
+/// seed per point for every count.
+fn sample_sweep(
+    refs: &[DVec3],
+    budget: Duration,
+    points: &[ShadingPoint],
+    estimate: impl Fn(&Surface, &mut Rng, u32) -> DVec3,
+) -> Vec<(u32, Measurement)> {
+    SAMPLE_COUNTS
+        .into_iter()
+        .map(|n| {
+            let m = measure(refs, budget, |i| {
+                let mut rng = Rng::new(SEED ^ ((i as u64) << 20));
+                Sample {
+                    radiance: estimate(&surface(&points[i]), &mut rng, n),
+                    bound: None,
+                    cost: n,
+                    queries: None,
+                }
+            });
+            (n, m)
+        })
+        .collect()
+}
+
 /// Prints a scene's heading and its tree's size and build time.
 fn print_header(scene: &Scene, tree: &LightTree, build: Duration) {
     println!("## Scene `{}`: {}", scene.name, scene.description);
@@ -535,32 +560,14 @@ fn sweep<S: Shader + Copy + Send + Sync>(
     let shader = make(BoundKind::Tight);
     let power = PowerSampler::new(&scene.lights);
     let tree_sampler = TreeSampler::new(&tree);
-    for n in SAMPLE_COUNTS {
-        let m = measure(&refs, cfg.budget, |i| {
-            let mut rng = Rng::new(SEED ^ ((i as u64) << 20));
-            Sample {
-                radiance: power
-                    .estimate(&shader, &surface(&points[i]), &mut rng, n, |_| true)
-                    .0,
-                bound: None,
-                cost: n,
-                queries: None,
-            }
-        });
+    for (n, m) in sample_sweep(&refs, cfg.budget, points, |s, rng, n| {
+        power.estimate(&shader, s, rng, n, |_| true).0
+    }) {
         record(Method::PowerSampling, format!("n={n}"), m);
     }
-    for n in SAMPLE_COUNTS {
-        let m = measure(&refs, cfg.budget, |i| {
-            let mut rng = Rng::new(SEED ^ ((i as u64) << 20));
-            Sample {
-                radiance: tree_sampler
-                    .estimate(&shader, &surface(&points[i]), &mut rng, n, |_| true)
-                    .0,
-                bound: None,
-                cost: n,
-                queries: None,
-            }
-        });
+    for (n, m) in sample_sweep(&refs, cfg.budget, points, |s, rng, n| {
+        tree_sampler.estimate(&shader, s, rng, n, |_| true).0
+    }) {
         record(Method::TreeSampling, format!("n={n}"), m);
     }
     drop(record);
