@@ -207,6 +207,23 @@ fn aabb(min: [f32; 3], max: [f32; 3]) -> Aabb {
     }
 }
 
+/// Everything a shadowed result must satisfy: the certified bound, the
+/// threshold, the query counters, and exactness at threshold 0.
+fn check_occluded(
+    r: &ShadeResult,
+    exact: DVec3,
+    t: &Threshold,
+    host: &Occluders,
+) -> Result<(), TestCaseError> {
+    check_bound(r, exact)?;
+    check_threshold(r, t)?;
+    check_counters(r, host)?;
+    if *t == Threshold::exact() {
+        check_exact(r, exact)?;
+    }
+    Ok(())
+}
+
 /// The result's query counters agree with what the host was asked.
 fn check_counters(r: &ShadeResult, host: &Occluders) -> Result<(), TestCaseError> {
     prop_assert_eq!(r.classify_queries, host.classified());
@@ -578,12 +595,7 @@ proptest! {
                 .unwrap();
             let mut host = Occluders::with_fraction(boxes.clone(), fraction);
             let r = shading.shade_occluded(p, n, t, &mut host).unwrap();
-            check_bound(&r, exact)?;
-            check_threshold(&r, &t)?;
-            check_counters(&r, &host)?;
-            if t == Threshold::exact() {
-                check_exact(&r, exact)?;
-            }
+            check_occluded(&r, exact, &t, &host)?;
         }
     }
 
@@ -604,12 +616,7 @@ proptest! {
                 .unwrap();
             let mut host = Occluders::with_fraction(boxes.clone(), fraction);
             let r = shading.shade_view_occluded(p, n, v, t, &mut host).unwrap();
-            check_bound(&r, exact)?;
-            check_threshold(&r, &t)?;
-            check_counters(&r, &host)?;
-            if t == Threshold::exact() {
-                check_exact(&r, exact)?;
-            }
+            check_occluded(&r, exact, &t, &host)?;
         }
     }
 
