@@ -1,15 +1,31 @@
-//! Building the tree: an adaptive octree over point lights.
+//! Building the tree: an adaptive octree over point lights, and the node
+//! statistics that building and refitting share.
 
 use glam::{DVec3, Vec3};
 
-use crate::tree::{Aabb, LightTree, Node};
-use crate::{BuildError, MAX_COORDINATE, PointLight};
+use super::layout::{LightTree, Node};
+use crate::geometry::Aabb;
+use crate::numeric::{BUILD_LENGTH_SLACK, round_up_f32};
+use crate::{BuildError, PointLight};
 
-/// Relative inflation applied to distances computed in `f64` at build time
-/// before they are rounded upward to `f32`: an `f64` length of a difference
-/// carries at most a few ulps (`2^-52` each) of error, so `8 * f64::EPSILON`
-/// covers it with margin.
-const BUILD_LENGTH_SLACK: f64 = 8.0 * f64::EPSILON;
+impl LightTree {
+    /// Builds a tree with the default options of [`TreeBuilder`].
+    ///
+    /// An empty slice gives an empty tree, which shades to zero with zero
+    /// error.
+    ///
+    /// # Errors
+    /// A [`BuildError`] naming the first light with a non-finite or
+    /// out-of-range position, or a non-finite or negative intensity channel.
+    pub fn build(lights: &[PointLight]) -> Result<Self, BuildError> {
+        TreeBuilder::new().build(lights)
+    }
+
+    /// A builder carrying the options (maximum lights per leaf, maximum depth).
+    pub fn builder() -> TreeBuilder {
+        TreeBuilder::new()
+    }
+}
 
 /// Options for building a [`LightTree`].
 ///
@@ -28,6 +44,7 @@ const BUILD_LENGTH_SLACK: f64 = 8.0 * f64::EPSILON;
 /// between them), so depth is bounded by `max_depth` and by the `f32`
 /// resolution of the coordinates.
 #[derive(Clone, Copy, Debug)]
+#[must_use]
 pub struct TreeBuilder {
     max_leaf_lights: usize,
     max_depth: u32,
@@ -101,12 +118,12 @@ impl TreeBuilder {
         let mut i = 0;
         while i < tree.nodes.len() {
             let node = tree.nodes[i];
-            let bbox = node.bbox;
+            let aabb = node.aabb;
             let depth = depths[i];
             tree.depth = tree.depth.max(depth);
             if node.light_count as usize > self.max_leaf_lights && depth < self.max_depth {
                 let range = node.lights();
-                let groups = split(lights, &mut order[range.clone()], &mut scratch, bbox);
+                let groups = split(lights, &mut order[range.clone()], &mut scratch, aabb);
                 if groups.len() > 1 {
                     tree.nodes[i].first_child = tree.nodes.len() as u32;
                     tree.nodes[i].child_count = groups.len() as u32;
@@ -126,50 +143,15 @@ impl TreeBuilder {
     }
 }
 
-impl LightTree {
-    /// Moves and re-weights the lights without rebuilding the hierarchy (for
-    /// animated lights): every node's statistics are recomputed from the new
-    /// values, the grouping is kept.
-    ///
-    /// `lights` is in the caller's original order and must have the length
-    /// the tree was built with. Bounds stay certified after a refit (they are
-    /// recomputed, not extrapolated); only their tightness depends on the
-    /// lights having stayed near their groups. Time `O(n * depth)`.
-    ///
-    /// # Errors
-    /// The same [`BuildError`]s as building, checked before anything changes;
-    /// [`BuildError::InvalidOption`] when the length differs.
-    pub fn refit(&mut self, lights: &[PointLight]) -> Result<(), BuildError> {
-        if lights.len() != self.lights.len() {
-            return Err(BuildError::InvalidOption(
-                "refit needs as many lights as the tree was built with",
-            ));
-        }
-        check_lights(lights)?;
-        for (slot, &k) in self.lights.iter_mut().zip(&self.order) {
-            *slot = lights[k as usize];
-        }
-        let identity: Vec<u32> = (0..self.lights.len() as u32).collect();
-        for i in 0..self.nodes.len() {
-            let old = self.nodes[i];
-            let mut fresh = node_stats(&self.lights, &identity, old.lights());
-            fresh.first_child = old.first_child;
-            fresh.child_count = old.child_count;
-            self.nodes[i] = fresh;
-        }
-        Ok(())
-    }
-}
-
-fn check_lights(lights: &[PointLight]) -> Result<(), BuildError> {
+pub(super) fn check_lights(lights: &[PointLight]) -> Result<(), BuildError> {
     for (index, l) in lights.iter().enumerate() {
         if !l.position.is_finite() {
             return Err(BuildError::NonFinitePosition { index });
         }
-        if l.position.abs().max_element() > MAX_COORDINATE {
+        if l.position.abs().max_element() > PointLight::MAX_COORDINATE {
             return Err(BuildError::PositionOutOfRange {
                 index,
-                max: MAX_COORDINATE,
+                max: PointLight::MAX_COORDINATE,
             });
         }
         if !l.intensity.is_finite() {
@@ -190,10 +172,10 @@ fn split(
     lights: &[PointLight],
     idx: &mut [u32],
     scratch: &mut Vec<u32>,
-    bbox: Aabb,
+    aabb: Aabb,
 ) -> smallvec::SmallVec<[core::ops::Range<usize>; 8]> {
-    let min = bbox.min.as_dvec3();
-    let max = bbox.max.as_dvec3();
+    let min = aabb.min.as_dvec3();
+    let max = aabb.max.as_dvec3();
     let extent = max - min;
     let largest = extent.max_element();
     let mut out = smallvec::SmallVec::new();
@@ -245,22 +227,19 @@ fn split(
     out
 }
 
-/// Rounds a non-negative `f64` up to the next `f32` at or above it.
-pub(crate) fn round_up_f32(x: f64) -> f32 {
-    let y = x as f32;
-    if f64::from(y) < x { y.next_up() } else { y }
-}
-
 /// Computes a node's statistics over `lights[idx[range]]` (all in `f64`,
 /// then stored as documented on [`Node`]).
-fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>) -> Node {
+pub(super) fn node_stats(
+    lights: &[PointLight],
+    idx: &[u32],
+    range: core::ops::Range<usize>,
+) -> Node {
     let members = &idx[range.clone()];
     let mut intensity = DVec3::ZERO;
     let mut weight = 0.0f64;
     let mut weighted_pos = DVec3::ZERO;
     let mut plain_pos = DVec3::ZERO;
-    let mut bmin = Vec3::splat(f32::INFINITY);
-    let mut bmax = Vec3::splat(f32::NEG_INFINITY);
+    let mut aabb = Aabb::EMPTY;
     for &k in members {
         let l = lights[k as usize];
         let w = f64::from(l.weight());
@@ -269,8 +248,7 @@ fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>
         weight += w;
         weighted_pos += w * x;
         plain_pos += x;
-        bmin = bmin.min(l.position);
-        bmax = bmax.max(l.position);
+        aabb = aabb.union_point(l.position);
     }
     // Zero total weight: every member is dark; use the plain mean so the node
     // still has a sensible position (its contribution is zero either way).
@@ -280,7 +258,7 @@ fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>
         plain_pos / members.len() as f64
     };
     // The average lies in the box in exact arithmetic; clamp away rounding.
-    let centroid = centroid_f64.as_vec3().clamp(bmin, bmax);
+    let centroid = centroid_f64.as_vec3().clamp(aabb.min, aabb.max);
     let c = centroid.as_dvec3();
 
     let mut radius_sq = 0.0f64;
@@ -328,10 +306,7 @@ fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>
         radius,
         channel_offsets: [offset(0), offset(1), offset(2)],
         covariance,
-        bbox: Aabb {
-            min: bmin,
-            max: bmax,
-        },
+        aabb,
         first_light: range.start as u32,
         light_count: members.len() as u32,
         first_child: 0,
