@@ -157,9 +157,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             // ball holds the shading point; no query is needed.
             return None;
         }
-        if node.light_count == 1 {
-            let light = self.tree.lights[node.first_light as usize];
-            self.exact_light(light.position, light.intensity, visible, weight);
+        if node.radius == 0.0 {
+            // A single light, or coincident lights (the build makes them one
+            // leaf): exactly one light of the summed intensity at the
+            // centroid, whatever their number.
+            self.exact_light(node.centroid, node.intensity, visible, weight);
             return None;
         }
         let mut partial = false;
@@ -224,7 +226,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// Adds one light's exact contribution, times `weight`, asking the host
     /// for point-to-point visibility unless the light is known visible.
     #[inline]
-    fn exact_light(&mut self, position: Vec3, intensity: Vec3, visible: bool, weight: f64) {
+    fn exact_light(&mut self, position: Vec3, intensity: DVec3, visible: bool, weight: f64) {
         if !V::ALWAYS_VISIBLE && !visible {
             self.point_queries += 1;
             if !self.visibility.visible(self.point, position) {
@@ -236,7 +238,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             &self.per_point,
             self.surface,
             position.as_dvec3(),
-            intensity.as_dvec3(),
+            intensity,
         );
         self.settled.add(value * weight);
     }
@@ -255,7 +257,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         if node.is_leaf() {
             for k in node.lights() {
                 let l = self.tree.lights[k];
-                self.exact_light(l.position, l.intensity, visible, weight);
+                self.exact_light(l.position, l.intensity.as_dvec3(), visible, weight);
             }
         } else {
             for child in node.children() {

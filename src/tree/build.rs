@@ -39,7 +39,11 @@ impl LightTree {
 /// [`max_leaf_lights`](Self::max_leaf_lights) lights, when it reaches
 /// [`max_depth`](Self::max_depth), or when all its lights are coincident
 /// (zero extent): thousands of coincident lights make one leaf, never an
-/// endless recursion. Nearly coincident lights are always separated by a
+/// endless recursion, and the cut evaluates such a leaf as one light of
+/// their summed intensity. Below half the maximum depth, nodes are halved at
+/// the median of their longest axis instead of split at the box centre, so
+/// that however deep the clustering (lights at `2^-k`, say), leaves stay
+/// small: the median splits need at most `log2(n) <= 32` more levels. Nearly coincident lights are always separated by a
 /// split (the `f64` midpoint of two distinct `f32` values lies strictly
 /// between them), so depth is bounded by `max_depth` and by the `f32`
 /// resolution of the coordinates.
@@ -123,7 +127,12 @@ impl TreeBuilder {
             tree.depth = tree.depth.max(depth);
             if node.light_count as usize > self.max_leaf_lights && depth < self.max_depth {
                 let range = node.lights();
-                let groups = split(lights, &mut order[range.clone()], &mut scratch, aabb);
+                let members = &mut order[range.clone()];
+                let groups = if depth < self.max_depth / 2 {
+                    split(lights, members, &mut scratch, aabb)
+                } else {
+                    median_split(lights, members, aabb)
+                };
                 if groups.len() > 1 {
                     tree.nodes[i].first_child = tree.nodes.len() as u32;
                     tree.nodes[i].child_count = groups.len() as u32;
@@ -163,6 +172,37 @@ pub(super) fn check_lights(lights: &[PointLight]) -> Result<(), BuildError> {
         }
     }
     Ok(())
+}
+
+/// Halves `idx` at the median position along the box's longest axis (two
+/// ranges), or returns one range when all lights coincide. Used below half
+/// the maximum depth, where spatial splits of exponentially clustered lights
+/// (at `2^-k`, say) would separate one light per level: halving the count
+/// bounds the remaining depth by `log2(n)`.
+fn median_split(
+    lights: &[PointLight],
+    idx: &mut [u32],
+    aabb: Aabb,
+) -> smallvec::SmallVec<[core::ops::Range<usize>; 8]> {
+    let extent = aabb.max - aabb.min;
+    let mut out = smallvec::SmallVec::new();
+    if extent.max_element() <= 0.0 {
+        // All lights coincide: nothing can separate them.
+        out.push(0..idx.len());
+        return out;
+    }
+    let axis = extent.max_position();
+    let mid = idx.len() / 2;
+    idx.select_nth_unstable_by(mid, |&a, &b| {
+        let (a, b) = (
+            lights[a as usize].position[axis],
+            lights[b as usize].position[axis],
+        );
+        a.total_cmp(&b)
+    });
+    out.push(0..mid);
+    out.push(mid..idx.len());
+    out
 }
 
 /// Partitions `idx` (indices into `lights`) into the non-empty cells of the
