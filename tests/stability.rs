@@ -1,4 +1,4 @@
-//! Stiff and extreme cases, one named test each (BRIEF section 8). Every
+//! Stiff and extreme cases, one named test each. Every
 //! case asserts no panic, finite output (or a documented infinite bound),
 //! and the certified bound against `shade_exact`, for Lambert (both
 //! bounds), Phong over the extreme exponents, and their sum; or a clear
@@ -418,7 +418,7 @@ fn rescaled_scene_scales_exactly_for_powers_of_two() {
     }
 }
 
-/// The decimal factors the issue names: coordinates then round to `f32`
+/// Decimal scale factors: coordinates then round to `f32`
 /// differently (relative `2^-24`), which may flip a split or a refinement
 /// at a tie, so the cut may differ slightly; the model must still scale to
 /// that rounding and both certified results must agree within their bounds.
