@@ -3,6 +3,7 @@
 
 mod build;
 mod layout;
+mod morton;
 mod refit;
 mod validate;
 
