@@ -21,18 +21,83 @@ pub(crate) enum Class {
     Unbounded,
 }
 
-/// An unrefined node of the cut.
+/// What an entry of the cut stands for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Item {
+    /// A node with a finite bound (or none: [`Class::Unbounded`]).
+    Node(u32),
+    /// A node whose lights all sit at its centroid (one light, or coincident
+    /// ones): one light of the node's summed intensity.
+    Lamp(u32),
+    /// One light, by its index in the tree's leaf order.
+    Light(u32),
+}
+
+/// What the host has said about an entry's visibility.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Seen {
+    /// Fully visible: the unoccluded interval holds.
+    Visible,
+    /// Not asked yet: anything in `[0, unoccluded upper bound]`.
+    Unknown,
+    /// Partially occluded: still anything in `[0, upper]`, estimated at the
+    /// host's visible fraction when it gives one, else at the middle.
+    Partial(Option<f32>),
+}
+
+/// An entry of the cut: a node or light not refined (or not asked) yet.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Entry {
     pub(crate) class: Class,
-    /// Largest channel of the error bound: the error list's key.
+    /// Largest channel of the counted error: the error list's key.
     pub(crate) key: f64,
-    pub(crate) node: u32,
-    /// The node is known to be fully visible (no visibility query needed
-    /// below it).
-    pub(crate) visible: bool,
+    pub(crate) item: Item,
+    pub(crate) seen: Seen,
+    /// The unoccluded estimate and its error (exact values have error 0).
     pub(crate) estimate: DVec3,
     pub(crate) error: DVec3,
+}
+
+impl Entry {
+    /// An entry with its key set from what it counts for.
+    #[inline]
+    pub(crate) fn new(class: Class, item: Item, seen: Seen, estimate: DVec3, error: DVec3) -> Self {
+        let mut e = Self {
+            class,
+            key: 0.0,
+            item,
+            seen,
+            estimate,
+            error,
+        };
+        e.key = match class {
+            Class::Unbounded => f64::INFINITY,
+            _ => e.counted().1.max_element(),
+        };
+        e
+    }
+
+    /// The estimate and certified error the entry counts for in the cut.
+    /// Unless it is known visible, its contribution lies anywhere in `[0,
+    /// up]` with `up = estimate + error` (at least the unoccluded upper
+    /// bound): estimated at the middle (error `up / 2`, the smallest
+    /// possible), or at the host's visible fraction of the unoccluded
+    /// estimate (error the larger distance to an end).
+    #[inline]
+    pub(crate) fn counted(&self) -> (DVec3, DVec3) {
+        match self.seen {
+            Seen::Visible => (self.estimate, self.error),
+            Seen::Unknown | Seen::Partial(None) => {
+                let half = 0.5 * (self.estimate + self.error);
+                (half, half)
+            }
+            Seen::Partial(Some(fraction)) => {
+                let up = self.estimate + self.error;
+                let estimate = (self.estimate * f64::from(fraction)).clamp(DVec3::ZERO, up);
+                (estimate, estimate.max(up - estimate))
+            }
+        }
+    }
 }
 
 /// What the heap orders: an entry's class and key, and where its record
@@ -97,8 +162,9 @@ impl ErrorList {
             Class::OverContribution => self.over_contribution += 1,
             Class::Error => {}
         }
-        self.estimate += e.estimate;
-        self.error += e.error;
+        let (estimate, error) = e.counted();
+        self.estimate += estimate;
+        self.error += error;
         let slot = self.entries.len() as u32;
         self.heap.push(Key {
             key: e.key,
@@ -122,8 +188,9 @@ impl ErrorList {
             Class::OverContribution => self.over_contribution -= 1,
             Class::Error => {}
         }
-        self.estimate -= e.estimate;
-        self.error -= e.error;
+        let (estimate, error) = e.counted();
+        self.estimate -= estimate;
+        self.error -= error;
         Some(e)
     }
 
@@ -157,9 +224,9 @@ impl ErrorList {
         let mut estimate = CompensatedSum::default();
         let mut error = CompensatedSum::default();
         for k in &self.heap {
-            let e = &self.entries[k.slot as usize];
-            estimate.add(e.estimate);
-            error.add(e.error);
+            let (e, r) = self.entries[k.slot as usize].counted();
+            estimate.add(e);
+            error.add(r);
         }
         (self.estimate, self.error) = (estimate.value(), error.value());
         (self.estimate, self.error)

@@ -4,12 +4,12 @@
 
 use glam::{DVec3, Vec3};
 
-use super::error_list::{Class, Entry, ErrorList};
+use super::error_list::{Class, Entry, ErrorList, Item, Seen};
 use super::result::Stop;
 use super::threshold::Threshold;
 use crate::geometry::Surface;
 use crate::numeric::{CompensatedSum, SUM_SLACK};
-use crate::shader::{NodeEstimate, Shader};
+use crate::shader::Shader;
 use crate::tree::{LightTree, Node};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 
@@ -30,6 +30,8 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     pub(crate) nodes: u32,
     pub(crate) lights: u32,
     pub(crate) classify_queries: u32,
+    /// Classifications answered visible or occluded.
+    decisive_answers: u32,
     pub(crate) point_queries: u32,
 }
 
@@ -64,6 +66,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             nodes: 0,
             lights: 0,
             classify_queries: 0,
+            decisive_answers: 0,
             point_queries: 0,
         }
     }
@@ -86,13 +89,16 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         self.cost().saturating_add(cost) <= self.budget
     }
 
-    /// The paper's error list: starting from the root, replaces the node of
-    /// greatest (class, error) by its children while the threshold is not
-    /// met and the budget allows.
+    /// The paper's error list: starting from the root, takes the entry of
+    /// greatest (class, error) while the threshold is not met and the
+    /// budget allows. A node is refined (its children or lights replace
+    /// it); an entry whose visibility is unknown is first asked about, and
+    /// the answer decides: occluded entries drop out, visible ones go back
+    /// with their unoccluded interval, partial ones are refined.
     pub(crate) fn run(&mut self, list: &mut ErrorList, threshold: &Threshold) -> Outcome {
         list.clear();
         if !self.tree.nodes.is_empty()
-            && let Some(root) = self.evaluate(0, false, 1.0)
+            && let Some(root) = self.evaluate(0, V::ALWAYS_VISIBLE, 1.0)
         {
             list.push(root);
         }
@@ -112,20 +118,45 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             let Some(top) = list.peek().copied() else {
                 break;
             };
-            let node = self.tree.nodes[top.node as usize];
-            if !self.can_refine(&node) {
+            let refined = match top.item {
+                Item::Node(index) => Some(self.tree.nodes[index as usize]),
+                Item::Lamp(_) | Item::Light(_) => None,
+            };
+            let refining = top.seen != Seen::Unknown || self.gave_up_classifying();
+            if let Some(node) = refined.filter(|_| refining)
+                && !self.can_refine(&node)
+            {
                 outcome.stop = Stop::Budget;
                 break;
             }
-            let (estimate, error) = list.sums();
-            let before = threshold.excess(
-                self.settled.value() + estimate,
-                reported_bound(error),
-                largest,
-            );
-            outcome.last_step = Some((before, top.key));
+            if refining {
+                // Only refinements place the interpolation level; asking the
+                // host changes what an entry counts for, not the level.
+                let (estimate, error) = list.sums();
+                let before = threshold.excess(
+                    self.settled.value() + estimate,
+                    reported_bound(error),
+                    largest,
+                );
+                outcome.last_step = Some((before, top.key));
+            }
             list.pop();
-            self.refine(&node, top.visible, 1.0, |e| list.push(e));
+            match (refined, refining) {
+                (Some(node), true) => {
+                    let visible = top.seen == Seen::Visible;
+                    self.refine(&node, visible, 1.0, |e| list.push(e));
+                }
+                (Some(node), false) => {
+                    if let Some(e) = self.classify(&node, top) {
+                        list.push(e);
+                    }
+                }
+                (None, _) => {
+                    if self.ask_point(top.item) {
+                        self.settled.add(top.estimate);
+                    }
+                }
+            }
         }
         outcome
     }
@@ -141,98 +172,143 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         )
     }
 
-    /// Evaluates node `index` entering the cut with blend weight `weight`:
-    /// settles it (exact single lights, dark, occluded or error-free nodes),
-    /// or returns it as an unrefined entry.
+    /// Whether the host's classifications have been useless so far in this
+    /// call (at least [`GIVE_UP_AFTER`] asked, fewer than one in
+    /// [`GIVE_UP_RATIO`] visible or occluded), so that partial nodes are
+    /// refined without asking and single lights are asked point-to-point:
+    /// with many small occluders (foliage, a lattice) every answer is
+    /// "partial" and asking costs more than it saves.
     #[inline]
-    pub(crate) fn evaluate(
-        &mut self,
-        index: usize,
-        mut visible: bool,
-        weight: f64,
-    ) -> Option<Entry> {
+    fn gave_up_classifying(&self) -> bool {
+        self.classify_queries >= GIVE_UP_AFTER
+            && self.decisive_answers * GIVE_UP_RATIO < self.classify_queries
+    }
+
+    /// Asks the host about a node of unknown visibility taken from the
+    /// list: `None` when it is occluded (it drops out of the cut), else the
+    /// entry to put back: visible, with its unoccluded interval; partial,
+    /// estimated at the host's visible fraction if it gives one, and refined
+    /// when the cut takes it again.
+    fn classify(&mut self, node: &Node, top: Entry) -> Option<Entry> {
+        let Item::Node(index) = top.item else {
+            unreachable!("only nodes are classified")
+        };
+        self.classify_queries += 1;
+        let region = region(node, index as usize);
+        let seen = match self.visibility.classify(self.point, &region) {
+            Coverage::Occluded => {
+                self.decisive_answers += 1;
+                return None;
+            }
+            Coverage::Visible => {
+                self.decisive_answers += 1;
+                Seen::Visible
+            }
+            Coverage::Partial => Seen::Partial(
+                self.visibility
+                    .visible_fraction(self.point, &region)
+                    .filter(|f| f.is_finite())
+                    .map(|f| f.clamp(0.0, 1.0)),
+            ),
+        };
+        let e = Entry::new(top.class, top.item, seen, top.estimate, top.error);
+        if e.key <= 0.0 && e.class == Class::Error {
+            self.settled.add(e.counted().0);
+            return None;
+        }
+        Some(e)
+    }
+
+    /// Asks the host point-to-point about a lamp or light of unknown
+    /// visibility: whether it is visible.
+    fn ask_point(&mut self, item: Item) -> bool {
+        let position = match item {
+            Item::Lamp(index) => self.tree.nodes[index as usize].centroid,
+            Item::Light(index) => self.tree.lights[index as usize].position,
+            Item::Node(_) => unreachable!("nodes are classified, not asked point-to-point"),
+        };
+        self.point_queries += 1;
+        self.visibility.visible(self.point, position)
+    }
+
+    /// Evaluates node `index` entering the cut with blend weight `weight`:
+    /// settles it (dark nodes, error-free nodes, lamps known visible; times
+    /// `weight`), or returns it as an entry (not weighted). Nothing is asked of the host here: a node of
+    /// unknown visibility enters the cut as anything in `[0, upper]` and is
+    /// asked about only when the cut takes it.
+    #[inline]
+    pub(crate) fn evaluate(&mut self, index: usize, visible: bool, weight: f64) -> Option<Entry> {
         let node: &Node = &self.tree.nodes[index];
         if node.intensity == DVec3::ZERO {
             // Dark node: exactly zero whatever its geometry, even when its
             // ball holds the shading point; no query is needed.
             return None;
         }
+        let seen = if visible || V::ALWAYS_VISIBLE {
+            Seen::Visible
+        } else {
+            Seen::Unknown
+        };
         if node.radius == 0.0 {
             // A single light, or coincident lights (the build makes them one
             // leaf): exactly one light of the summed intensity at the
             // centroid, whatever their number.
-            self.exact_light(node.centroid, node.intensity, visible, weight);
-            return None;
-        }
-        let mut partial = false;
-        if !V::ALWAYS_VISIBLE && !visible {
-            self.classify_queries += 1;
-            match self.visibility.classify(self.point, &region(node, index)) {
-                Coverage::Occluded => return None,
-                Coverage::Visible => visible = true,
-                Coverage::Partial => partial = true,
-            }
+            return self.exact_light(
+                Item::Lamp(index as u32),
+                node.centroid,
+                node.intensity,
+                seen,
+                weight,
+            );
         }
         self.nodes += 1;
         let Some(cone) = node.cone(self.surface.point) else {
-            return Some(Entry {
-                class: Class::Unbounded,
-                key: f64::INFINITY,
-                node: index as u32,
-                visible,
-                estimate: DVec3::ZERO,
-                error: DVec3::ZERO,
-            });
+            return Some(Entry::new(
+                Class::Unbounded,
+                Item::Node(index as u32),
+                seen,
+                DVec3::ZERO,
+                DVec3::ZERO,
+            ));
         };
-        let mut bound = self
+        let bound = self
             .shader
             .bound(&self.per_point, self.surface, node, &cone);
-        if partial {
-            // Partially occluded: anything between 0 and the unoccluded upper
-            // bound. The host's visible fraction only moves the estimate.
-            let fraction = self
-                .visibility
-                .visible_fraction(self.point, &region(node, index));
-            let estimate = match fraction {
-                Some(f) if f.is_finite() => bound.estimate * f64::from(f.clamp(0.0, 1.0)),
-                _ => 0.5 * bound.upper,
-            };
-            bound = NodeEstimate::new(estimate, DVec3::ZERO, bound.upper);
-        }
-        let error = bound.error();
-        let key = error.max_element();
         let over = self
             .max_contribution
             .is_some_and(|m| bound.upper.max_element() > m);
-        if key <= 0.0 && !over {
+        let class = if over {
+            Class::OverContribution
+        } else {
+            Class::Error
+        };
+        let entry = Entry::new(
+            class,
+            Item::Node(index as u32),
+            seen,
+            bound.estimate,
+            bound.error(),
+        );
+        if entry.key <= 0.0 && !over {
             // Nothing to gain by refining (e.g. below the horizon).
-            self.settled.add(bound.estimate * weight);
+            self.settled.add(entry.counted().0 * weight);
             return None;
         }
-        Some(Entry {
-            class: if over {
-                Class::OverContribution
-            } else {
-                Class::Error
-            },
-            key,
-            node: index as u32,
-            visible,
-            estimate: bound.estimate,
-            error,
-        })
+        Some(entry)
     }
 
-    /// Adds one light's exact contribution, times `weight`, asking the host
-    /// for point-to-point visibility unless the light is known visible.
+    /// One light's exact unoccluded contribution: settled (times `weight`)
+    /// when the light is known visible or contributes nothing, otherwise
+    /// returned as an entry to be asked about when the cut takes it.
     #[inline]
-    fn exact_light(&mut self, position: Vec3, intensity: DVec3, visible: bool, weight: f64) {
-        if !V::ALWAYS_VISIBLE && !visible {
-            self.point_queries += 1;
-            if !self.visibility.visible(self.point, position) {
-                return;
-            }
-        }
+    fn exact_light(
+        &mut self,
+        item: Item,
+        position: Vec3,
+        intensity: DVec3,
+        seen: Seen,
+        weight: f64,
+    ) -> Option<Entry> {
         self.lights += 1;
         let value = self.shader.eval(
             &self.per_point,
@@ -240,12 +316,24 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             position.as_dvec3(),
             intensity,
         );
-        self.settled.add(value * weight);
+        let over = self
+            .max_contribution
+            .is_some_and(|m| value.max_element() > m);
+        if seen == Seen::Visible || value == DVec3::ZERO {
+            self.settled.add(value * weight);
+            return None;
+        }
+        let class = if over {
+            Class::OverContribution
+        } else {
+            Class::Error
+        };
+        Some(Entry::new(class, item, seen, value, DVec3::ZERO))
     }
 
     /// Refines `node`: its lights exactly if it is a leaf, its children
-    /// otherwise, each with blend weight `weight`; children that need
-    /// refinement are passed to `pending`.
+    /// otherwise, each with blend weight `weight`; entries that stay in the
+    /// cut are passed to `pending`.
     #[inline]
     pub(crate) fn refine(
         &mut self,
@@ -255,9 +343,19 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         mut pending: impl FnMut(Entry),
     ) {
         if node.is_leaf() {
+            let seen = if visible || V::ALWAYS_VISIBLE {
+                Seen::Visible
+            } else {
+                Seen::Unknown
+            };
             for k in node.lights() {
                 let l = self.tree.lights[k];
-                self.exact_light(l.position, l.intensity.as_dvec3(), visible, weight);
+                let item = Item::Light(k as u32);
+                if let Some(entry) =
+                    self.exact_light(item, l.position, l.intensity.as_dvec3(), seen, weight)
+                {
+                    pending(entry);
+                }
             }
         } else {
             for child in node.children() {
@@ -268,6 +366,12 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         }
     }
 }
+
+/// Classifications asked before the cut may judge them useless (see
+/// [`Cut::gave_up_classifying`]).
+const GIVE_UP_AFTER: u32 = 32;
+/// At most one useful answer in this many and the cut stops asking.
+const GIVE_UP_RATIO: u32 = 8;
 
 /// The certified bound reported for a summed error: the compensated sums
 /// are within a few ulps of the sums of magnitudes; what that leaves of the
