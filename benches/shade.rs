@@ -18,12 +18,7 @@ use criterion::{
 };
 use manylights::{Combined, Lambert, LightTree, Phong, ShadeResult, Threshold, Unoccluded};
 
-// Shared with the report; this bench uses the scenes, not the samplers.
-#[allow(dead_code)]
-#[path = "../examples/report/scenes.rs"]
-mod scenes;
-
-use scenes::{Scene, ShadingPoint};
+use manylights_report::scenes::{self, Scene, ShadingPoint};
 
 const SEED: u64 = 1998;
 /// Shading points cycled through per scene.

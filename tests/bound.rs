@@ -11,7 +11,7 @@ use manylights::{
 };
 use proptest::prelude::*;
 
-/// Phong exponents the issue names, all property-tested.
+/// Phong exponents from 0 to 10^6, all property-tested.
 const EXPONENTS: [f32; 6] = [0.0, 1.0, 10.0, 100.0, 1e4, 1e6];
 
 /// 96 cases per property in CI; `PROPTEST_CASES=N` overrides it for long
