@@ -19,50 +19,37 @@
 use std::error::Error;
 
 use glam::Vec3;
-use manylights::{Lambert, LightTree, Threshold};
-use manylights_report::camera::Camera;
-use manylights_report::compare::{ErrorStats, print_comparison, print_row, shade_pixels, timed};
-use manylights_report::image::write_comparison;
+use manylights::{Lambert, Threshold};
+use manylights_report::compare::{ErrorStats, print_comparison, shade_pixels, timed};
 use manylights_report::options::Options;
-use manylights_report::raycast::albedo_image;
-use manylights_report::scenes::City;
+use manylights_report::raycast::{CityView, Shot};
 
 /// A 2 km city of 50 x 50 blocks; both renders take well under a minute.
 const BLOCKS: u32 = 50;
 const SEED: u64 = 1998;
-const EYE: Vec3 = Vec3::new(760.0, 120.0, 160.0);
-const TARGET: Vec3 = Vec3::new(870.0, 640.0, 0.0);
-const FOV_DEGREES: f32 = 45.0;
-/// Percentile of the exact image that the exposure maps to white.
-const EXPOSURE_PERCENTILE: f64 = 0.995;
+/// Eye, target and vertical field of view (degrees).
+const SHOT: Shot = (
+    Vec3::new(760.0, 120.0, 160.0),
+    Vec3::new(870.0, 640.0, 0.0),
+    45.0,
+);
 
 fn main() -> Result<(), Box<dyn Error>> {
-    let options = Options::parse(Options {
-        lights: 100_000,
-        width: 320,
-        height: 180,
-        threshold: 0.01,
-        out: "out".into(),
-    });
-    let city = City::new(BLOCKS, options.lights, SEED);
-    let (tree, build_time) = timed(|| LightTree::build(&city.lights));
-    let tree = tree?;
-    let (w, h) = (options.width, options.height);
-    let camera = Camera::new(EYE, TARGET, FOV_DEGREES, w, h);
-    let (hits, trace_time) = timed(|| city.trace(&camera));
+    let options = Options::parse(100_000, (320, 180));
+    let view = CityView::new(BLOCKS, SEED, &options, SHOT)?;
 
     // Unit albedo: Lambert is linear in kd, so each pixel's albedo multiplies
     // the radiance (and its bound) afterwards.
-    let shading = || tree.shading(Lambert::new(Vec3::ONE));
+    let shading = || view.tree.shading(Lambert::new(Vec3::ONE));
     let threshold = Threshold::relative(options.threshold);
     let (results, tree_time) = timed(|| {
-        shade_pixels(&hits, shading, |s, hit| {
+        shade_pixels(&view.hits, shading, |s, hit| {
             s.shade(hit.point, hit.normal, threshold)
         })
     });
     let results = results?;
     let (exact, exact_time) = timed(|| {
-        shade_pixels(&hits, shading, |s, hit| {
+        shade_pixels(&view.hits, shading, |s, hit| {
             s.shade_exact(hit.point, hit.normal)
         })
     });
@@ -70,22 +57,7 @@ fn main() -> Result<(), Box<dyn Error>> {
 
     let stats = ErrorStats::new(&results, &exact);
     println!("city at night, Lambert, no shadows");
-    print_row("lights", tree.len());
-    print_row("image", format!("{w}x{h}"));
-    print_row("shaded pixels", hits.iter().flatten().count());
-    print_row("threshold (relative)", options.threshold);
-    print_row("primary rays", format!("{:.3} s", trace_time.as_secs_f64()));
-    print_comparison(build_time, tree_time, exact_time, &results, &stats);
-
-    let tree_image = albedo_image(&hits, results.iter().map(|r| r.map(|r| r.radiance)));
-    write_comparison(
-        &options.out,
-        "city",
-        (w, h),
-        &tree_image,
-        &albedo_image(&hits, exact.into_iter()),
-        options.threshold,
-        EXPOSURE_PERCENTILE,
-    )?;
-    stats.ensure_certified()
+    view.print_setup(&options, false);
+    print_comparison(view.build_time, tree_time, exact_time, &results, &stats);
+    view.finish(&options, "city", &results, &exact, &stats)
 }

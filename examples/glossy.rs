@@ -30,13 +30,7 @@ const FOV_DEGREES: f32 = 60.0;
 const EXPOSURE_PERCENTILE: f64 = 0.995;
 
 fn main() -> Result<(), Box<dyn Error>> {
-    let options = Options::parse(Options {
-        lights: 20_000,
-        width: 320,
-        height: 200,
-        threshold: 0.01,
-        out: "out".into(),
-    });
+    let options = Options::parse(20_000, (320, 200));
     let scene = Glossy::new(options.lights);
     let (tree, build_time) = timed(|| LightTree::build(&scene.lights));
     let tree = tree?;

@@ -17,11 +17,21 @@ pub struct Options {
     pub out: PathBuf,
 }
 
+/// Default relative threshold of the certified bound (1%).
+pub const DEFAULT_THRESHOLD: f64 = 0.01;
+
 impl Options {
-    /// Parses the process arguments over `defaults`; prints the usage and
-    /// exits on a malformed or unknown flag.
-    pub fn parse(defaults: Options) -> Options {
-        let mut options = defaults;
+    /// Parses the process arguments over the defaults `lights` and
+    /// `width x height`, [`DEFAULT_THRESHOLD`] and `out/`; prints the usage
+    /// and exits on a malformed or unknown flag.
+    pub fn parse(lights: usize, (width, height): (u32, u32)) -> Options {
+        let mut options = Options {
+            lights,
+            width,
+            height,
+            threshold: DEFAULT_THRESHOLD,
+            out: PathBuf::from("out"),
+        };
         let mut args = std::env::args().skip(1);
         while let Some(flag) = args.next() {
             let value = args.next().unwrap_or_default();
@@ -45,5 +55,10 @@ impl Options {
             }
         }
         options
+    }
+
+    /// Image width and height.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
     }
 }

@@ -1,12 +1,19 @@
 //! Primary rays through the night city: the nearest hit on the ground or a
-//! building, through the BVH over the buildings.
+//! building, through the BVH over the buildings; and [`CityView`], what the
+//! `city` and `shadows` examples render.
 
 use std::cell::Cell;
+use std::error::Error;
+use std::time::Duration;
 
 use glam::{DVec3, Vec3};
+use manylights::{LightTree, ShadeResult};
 
 use crate::bvh::{entry_normal, slab};
 use crate::camera::Camera;
+use crate::compare::{ErrorStats, print_row, timed};
+use crate::image::write_comparison;
+use crate::options::Options;
 use crate::scenes::{City, GROUND_ALBEDO};
 
 /// A primary-ray hit: the shading point, its outward normal, its albedo.
@@ -75,10 +82,7 @@ impl City {
 /// An image from per-pixel unit-albedo `values` (`None` for the sky, black),
 /// each times its hit's albedo: Lambert is linear in `kd`, so this equals
 /// shading with the albedo.
-pub fn albedo_image(
-    hits: &[Option<Hit>],
-    values: impl Iterator<Item = Option<DVec3>>,
-) -> Vec<DVec3> {
+fn albedo_image(hits: &[Option<Hit>], values: impl Iterator<Item = Option<DVec3>>) -> Vec<DVec3> {
     hits.iter()
         .zip(values)
         .map(|(hit, v)| match (hit, v) {
@@ -86,4 +90,89 @@ pub fn albedo_image(
             _ => DVec3::ZERO,
         })
         .collect()
+}
+
+/// Percentile of the exact image that the exposure maps to white.
+const EXPOSURE_PERCENTILE: f64 = 0.995;
+
+/// Where a camera looks at a night city from: eye, target, vertical field
+/// of view in degrees.
+pub type Shot = (Vec3, Vec3, f32);
+
+/// A night city seen by a camera: the city, its light tree, each pixel's
+/// primary-ray hit, and the times the build and the rays took.
+pub struct CityView {
+    /// The city.
+    pub city: City,
+    /// The tree over its lights.
+    pub tree: LightTree,
+    /// Each pixel's hit, row-major, `None` for the sky.
+    pub hits: Vec<Option<Hit>>,
+    /// Time of the tree build.
+    pub build_time: Duration,
+    /// Time of the primary rays.
+    pub trace_time: Duration,
+}
+
+impl CityView {
+    /// A city of `blocks x blocks` blocks with `options.lights` lights from
+    /// `seed`, its tree, and the hits of an `options.size()` image from
+    /// `shot`.
+    pub fn new(
+        blocks: u32,
+        seed: u64,
+        options: &Options,
+        shot: Shot,
+    ) -> Result<Self, Box<dyn Error>> {
+        let city = City::new(blocks, options.lights, seed);
+        let (tree, build_time) = timed(|| LightTree::build(&city.lights));
+        let (eye, target, fov_degrees) = shot;
+        let camera = Camera::new(eye, target, fov_degrees, options.width, options.height);
+        let (hits, trace_time) = timed(|| city.trace(&camera));
+        Ok(Self {
+            tree: tree?,
+            city,
+            hits,
+            build_time,
+            trace_time,
+        })
+    }
+
+    /// Prints the rows that say what was rendered: lights, buildings (if
+    /// `buildings`), image, pixels, threshold, primary rays.
+    pub fn print_setup(&self, options: &Options, buildings: bool) {
+        print_row("lights", self.tree.len());
+        if buildings {
+            print_row("buildings", self.city.buildings.len());
+        }
+        print_row("image", format!("{}x{}", options.width, options.height));
+        print_row("shaded pixels", self.hits.iter().flatten().count());
+        print_row("threshold (relative)", options.threshold);
+        let trace = self.trace_time.as_secs_f64();
+        print_row("primary rays", format!("{trace:.3} s"));
+    }
+
+    /// Writes `<name>_{tree,exact,diff}.png` under `options.out` from the
+    /// unit-albedo results, each pixel times its albedo, then fails if a
+    /// pixel breaks the certified bound (`stats`).
+    pub fn finish(
+        &self,
+        options: &Options,
+        name: &str,
+        results: &[Option<ShadeResult>],
+        exact: &[Option<DVec3>],
+        stats: &ErrorStats,
+    ) -> Result<(), Box<dyn Error>> {
+        let tree_image = albedo_image(&self.hits, results.iter().map(|r| r.map(|r| r.radiance)));
+        write_comparison(
+            &options.out,
+            name,
+            options.size(),
+            &tree_image,
+            &albedo_image(&self.hits, exact.iter().copied()),
+            options.threshold,
+            EXPOSURE_PERCENTILE,
+        )?;
+        stats.ensure_certified()
+    }
 }

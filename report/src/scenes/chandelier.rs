@@ -27,7 +27,7 @@ const WARM_WHITE: Vec3 = Vec3::new(1.0, 0.85, 0.6);
 /// Seed offset of the shading points.
 const POINTS_SEED: u64 = 0xC4A;
 
-/// `chandelier`: a dense cluster of `lights` lights on [`TIERS`] rings within
+/// `chandelier`: a dense cluster of `lights` lights on `TIERS` rings within
 /// a ball of radius about 2 units, 4-5 units above a floor; shading points on
 /// the room's floor.
 pub fn chandelier(lights: usize, points: usize, seed: u64) -> Scene {

@@ -14,8 +14,8 @@
 //! * [`chandelier`]: a dense cluster of lights over a floor.
 //! * [`strings`], [`specular`], [`Glossy`]: strings of lights, over a
 //!   diffuse ground, a glossy floor, and a glossy floor with spheres.
-//! * [`ground`]: lights 4 to 6 units above a 1000 x 1000 ground, points on
-//!   it (the prototype table).
+//! * [`ground_lights`], [`ground_points`]: lights 4 to 6 units above a
+//!   1000 x 1000 ground, points on it (the evaluations-per-point table).
 
 mod chandelier;
 mod ground;

@@ -31,7 +31,7 @@ const LED_WHITE: Vec3 = Vec3::new(0.85, 0.9, 1.0);
 const CITY_POINTS_SEED: u64 = 0xC17;
 
 /// Street lamps of a city grid, `count` of them. The density is fixed (one
-/// block of [`CITY_BLOCK`] units square holds [`CITY_LAMPS_PER_BLOCK`]
+/// block of `CITY_BLOCK` units square holds `CITY_LAMPS_PER_BLOCK`
 /// lamps), so the city's area grows with `count`: blocks are filled row by
 /// row on a square grid just large enough.
 pub fn city_lights(count: usize, seed: u64) -> Vec<PointLight> {
@@ -103,7 +103,7 @@ pub fn city(lights: usize, points: usize, seed: u64) -> Scene {
 }
 
 /// Streets of the lamp grid every this many units, lamps every
-/// [`GRID_LAMP_SPACING`] along them, all at one height.
+/// `GRID_LAMP_SPACING` along them, all at one height.
 pub const GRID_BLOCK: f32 = 40.0;
 const GRID_LAMP_SPACING: f32 = 4.0;
 const GRID_LAMP_HEIGHT: f32 = 6.0;
@@ -116,7 +116,7 @@ const GRID_INTENSITY: f32 = 100.0;
 const GRID_ROW_OFFSET: f32 = 1.5;
 
 /// A regular grid of `blocks x blocks` blocks of [`GRID_BLOCK`] units: a row
-/// of lamps every [`GRID_LAMP_SPACING`] units along each street in both
+/// of lamps every `GRID_LAMP_SPACING` units along each street in both
 /// directions, 6 units above the ground, warm colours varying a little.
 pub fn lamp_grid(blocks: usize, seed: u64) -> Vec<PointLight> {
     let mut rng = rng(seed);

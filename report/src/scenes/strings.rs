@@ -68,8 +68,8 @@ const STRINGS_GROUND_HALF_SIZE: f32 = 28.0;
 /// Where the `strings` camera looks from.
 const STRINGS_CAMERA: Vec3 = Vec3::new(0.0, -40.0, 8.0);
 
-/// `strings`: Christmas lights, `lights` bulbs along [`TREE_HELICES`]
-/// helices wound around a conical tree and [`GARLANDS`] long garlands
+/// `strings`: Christmas lights, `lights` bulbs along `TREE_HELICES`
+/// helices wound around a conical tree and `GARLANDS` long garlands
 /// hanging from its top to poles; shading points on the ground around it.
 pub fn strings(lights: usize, points: usize, seed: u64) -> Scene {
     let on_tree = lights / 2;
@@ -133,7 +133,7 @@ const PLAZA_CAMERA: Vec3 = Vec3::new(0.0, -30.0, 10.0);
 /// Phong exponent of the glossy floor.
 pub const GLOSSY_EXPONENT: u32 = 100;
 
-/// `specular`: `lights` bulbs on [`FESTOON_STRINGS`] strings hanging over a
+/// `specular`: `lights` bulbs on `FESTOON_STRINGS` strings hanging over a
 /// glossy floor (Lambert `kd = 0.2` plus Phong `ks = 0.6`, exponent
 /// [`GLOSSY_EXPONENT`]), seen from a camera.
 pub fn specular(lights: usize, points: usize, seed: u64) -> Scene {
@@ -240,7 +240,7 @@ pub struct Glossy {
 }
 
 impl Glossy {
-    /// The scene with `count` bulbs on [`GLOSSY_STRINGS`] strings.
+    /// The scene with `count` bulbs on `GLOSSY_STRINGS` strings.
     pub fn new(count: usize) -> Self {
         let per_string = count.div_ceil(GLOSSY_STRINGS);
         let lights = (0..count)
