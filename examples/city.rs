@@ -19,8 +19,8 @@
 use std::error::Error;
 
 use glam::Vec3;
-use manylights::{Lambert, Threshold};
-use manylights_report::compare::{ErrorStats, print_comparison, shade_pixels, timed};
+use manylights::Threshold;
+use manylights_report::compare::{ErrorStats, print_comparison};
 use manylights_report::options::Options;
 use manylights_report::raycast::{CityView, Shot};
 
@@ -38,22 +38,9 @@ fn main() -> Result<(), Box<dyn Error>> {
     let options = Options::parse(100_000, (320, 180));
     let view = CityView::new(BLOCKS, SEED, &options, SHOT)?;
 
-    // Unit albedo: Lambert is linear in kd, so each pixel's albedo multiplies
-    // the radiance (and its bound) afterwards.
-    let shading = || view.tree.shading(Lambert::new(Vec3::ONE));
     let threshold = Threshold::relative(options.threshold);
-    let (results, tree_time) = timed(|| {
-        shade_pixels(&view.hits, shading, |s, hit| {
-            s.shade(hit.point, hit.normal, threshold)
-        })
-    });
-    let results = results?;
-    let (exact, exact_time) = timed(|| {
-        shade_pixels(&view.hits, shading, |s, hit| {
-            s.shade_exact(hit.point, hit.normal)
-        })
-    });
-    let exact = exact?;
+    let (results, tree_time) = view.shade(|s, hit| s.shade(hit.point, hit.normal, threshold))?;
+    let (exact, exact_time) = view.shade(|s, hit| s.shade_exact(hit.point, hit.normal))?;
 
     let stats = ErrorStats::new(&results, &exact);
     println!("city at night, Lambert, no shadows");

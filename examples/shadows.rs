@@ -18,10 +18,8 @@
 use std::error::Error;
 
 use glam::Vec3;
-use manylights::{Lambert, ShadeResult, Threshold};
-use manylights_report::compare::{
-    ErrorStats, mean_per_pixel, print_comparison, print_row, shade_pixels, timed,
-};
+use manylights::{ShadeResult, Threshold};
+use manylights_report::compare::{ErrorStats, mean_per_pixel, print_comparison, print_row};
 use manylights_report::options::Options;
 use manylights_report::raycast::{CityView, Shot};
 use manylights_report::scenes::SHADOW_BLOCKS;
@@ -39,25 +37,18 @@ fn main() -> Result<(), Box<dyn Error>> {
     let options = Options::parse(20_000, (256, 144));
     let view = CityView::new(SHADOW_BLOCKS, SEED, &options, SHOT)?;
 
-    // Unit albedo, as in `city`; each pixel's host counts its answers.
-    let shading = || view.tree.shading(Lambert::new(Vec3::ONE));
+    // Each pixel's host counts its answers.
     let threshold = Threshold::relative(options.threshold);
-    let (shaded, tree_time) = timed(|| {
-        shade_pixels(&view.hits, shading, |s, hit| {
-            let mut host = Shadows::new(&view.city, hit.normal);
-            let r = s.shade_occluded(hit.point, hit.normal, threshold, &mut host)?;
-            Ok((r, host.answers))
-        })
-    });
-    let shaded = shaded?;
+    let (shaded, tree_time) = view.shade(|s, hit| {
+        let mut host = Shadows::new(&view.city, hit.normal);
+        let r = s.shade_occluded(hit.point, hit.normal, threshold, &mut host)?;
+        Ok((r, host.answers))
+    })?;
     let results: Vec<Option<ShadeResult>> = shaded.iter().map(|s| s.map(|s| s.0)).collect();
-    let (exact, exact_time) = timed(|| {
-        shade_pixels(&view.hits, shading, |s, hit| {
-            let mut host = Shadows::new(&view.city, hit.normal);
-            s.shade_exact_occluded(hit.point, hit.normal, &mut host)
-        })
-    });
-    let exact = exact?;
+    let (exact, exact_time) = view.shade(|s, hit| {
+        let mut host = Shadows::new(&view.city, hit.normal);
+        s.shade_exact_occluded(hit.point, hit.normal, &mut host)
+    })?;
 
     let stats = ErrorStats::new(&results, &exact);
     println!("city at night with shadows, Lambert");

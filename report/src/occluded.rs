@@ -8,13 +8,12 @@ use manylights::{Lambert, Threshold};
 
 use crate::config::{Config, SHADOW_PER_NODE, SHADOW_RELATIVE, SOA_TOLERANCE, TREE_ABSOLUTE, WARD};
 use crate::measure::{Method, Record, Sample, measure};
-use crate::sampling::{PowerSampler, TreeSampler};
 use crate::scenes::{City, Scene, ShadingPoint};
 use crate::shadowed::{ShadowLights, Ward};
 use crate::shadows::Shadows;
 use crate::sweep::{
-    absolute_parameter, build_tree, measure_cut, median, print_header, recorder, references,
-    sample_sweep,
+    Bench, absolute_parameter, build_tree, measure_cut, median, print_header, recorder, references,
+    sample_sweeps,
 };
 
 /// The host of each shading point: the city's classifier and shadow rays.
@@ -48,13 +47,13 @@ pub fn run_occluded<'c>(
 
     let mut rows = Vec::new();
     let mut record = recorder(scene.name, scene.lights.len(), &mut rows);
-    let (lights, budget) = (scene.lights.len() as u32, cfg.budget);
+    let (light_count, budget) = (scene.lights.len() as u32, cfg.budget);
 
     let mut soa = ShadowLights::new(&scene.lights, scene.material.kd);
     let m = measure(&refs, budget, |i| {
         let pt = &points[i];
         let (radiance, rays) = soa.exact(pt.point, pt.normal, &mut host(pt));
-        Sample::estimate(radiance, lights, Some(rays))
+        Sample::estimate(radiance, light_count, Some(rays))
     });
     if !(m.max_error <= SOA_TOLERANCE) {
         return Err(format!(
@@ -66,7 +65,12 @@ pub fn run_occluded<'c>(
     record(Method::ExactShadowed, "-".into(), m);
 
     let occluded: Option<&dyn Fn(&ShadingPoint) -> Shadows<'c>> = Some(&host);
-    let cut = |threshold| measure_cut(&tree, shader, &points, &refs, budget, threshold, occluded);
+    let bench = Bench {
+        points: &points,
+        refs: &refs,
+        budget,
+    };
+    let cut = |threshold| measure_cut(&tree, shader, bench, threshold, occluded);
     for t in SHADOW_RELATIVE {
         record(
             Method::TreeRelative,
@@ -86,21 +90,14 @@ pub fn run_occluded<'c>(
         );
     }
 
-    let power = PowerSampler::new(&scene.lights);
-    for (n, m) in sample_sweep(&power, &shader, &points, &refs, budget, occluded) {
-        record(Method::PowerSampling, format!("n={n}"), m);
-    }
-    let tree_sampler = TreeSampler::new(&tree);
-    for (n, m) in sample_sweep(&tree_sampler, &shader, &points, &refs, budget, occluded) {
-        record(Method::TreeSampling, format!("n={n}"), m);
-    }
+    sample_sweeps(&mut record, &tree, &shader, bench, occluded);
 
     let mut ward = Ward::default();
     for t in WARD {
         let m = measure(&refs, budget, |i| {
             let pt = &points[i];
             let (radiance, rays) = ward.shade(&mut soa, pt.point, pt.normal, t, &mut host(pt));
-            Sample::estimate(radiance, lights, Some(rays))
+            Sample::estimate(radiance, light_count, Some(rays))
         });
         record(Method::Ward, format!("t={t}"), m);
     }

@@ -7,11 +7,11 @@ use std::error::Error;
 use std::time::Duration;
 
 use glam::{DVec3, Vec3};
-use manylights::{LightTree, ShadeResult};
+use manylights::{Lambert, LightTree, ShadeError, ShadeResult, Shading};
 
 use crate::bvh::{entry_normal, slab};
 use crate::camera::Camera;
-use crate::compare::{ErrorStats, print_row, timed};
+use crate::compare::{ErrorStats, print_row, shade_pixels, timed};
 use crate::image::write_comparison;
 use crate::options::Options;
 use crate::scenes::{City, GROUND_ALBEDO};
@@ -136,6 +136,19 @@ impl CityView {
             build_time,
             trace_time,
         })
+    }
+
+    /// Shades every hit pixel in parallel with `shade(session, hit)`, the
+    /// sessions with unit albedo (Lambert is linear in `kd`: [`Self::finish`]
+    /// multiplies each pixel by its albedo afterwards); returns the values
+    /// and the time taken.
+    pub fn shade<T: Send>(
+        &self,
+        shade: impl Fn(&mut Shading<'_, Lambert>, &Hit) -> Result<T, ShadeError> + Sync + Send,
+    ) -> Result<(Vec<Option<T>>, Duration), ShadeError> {
+        let session = || self.tree.shading(Lambert::new(Vec3::ONE));
+        let (values, time) = timed(|| shade_pixels(&self.hits, session, shade));
+        Ok((values?, time))
     }
 
     /// Prints the rows that say what was rendered: lights, buildings (if

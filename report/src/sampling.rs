@@ -70,6 +70,18 @@ pub trait LightSampler {
     }
 }
 
+/// The contribution of `light` at `surface`: the shader's exact term.
+#[inline]
+fn contribution<S: Shader>(
+    shader: &S,
+    frame: &S::Frame,
+    surface: &Surface,
+    light: &PointLight,
+) -> DVec3 {
+    let (position, intensity) = (light.position.as_dvec3(), light.intensity.as_dvec3());
+    shader.eval(frame, surface, position, intensity)
+}
+
 /// One bin of Vose's alias table.
 #[derive(Clone, Copy, Debug)]
 struct AliasBin {
@@ -156,12 +168,7 @@ impl LightSampler for PowerSampler {
             bin.alias as usize
         };
         let light = &self.scaled[j];
-        let f = shader.eval(
-            frame,
-            surface,
-            light.position.as_dvec3(),
-            light.intensity.as_dvec3(),
-        );
+        let f = contribution(shader, frame, surface, light);
         (f.max_element() > 0.0).then_some((light.position, f))
     }
 }
@@ -246,14 +253,7 @@ impl LightSampler for TreeSampler<'_> {
             node = &nodes[children.start + pick];
         }
         // In the leaf, choose in proportion to the actual contribution.
-        let eval = |light: &PointLight| {
-            shader.eval(
-                frame,
-                surface,
-                light.position.as_dvec3(),
-                light.intensity.as_dvec3(),
-            )
-        };
+        let eval = |light: &PointLight| contribution(shader, frame, surface, light);
         let leaf = &self.tree.lights()[node.lights()];
         let total: f64 = leaf.iter().map(|l| eval(l).max_element()).sum();
         if total.is_nan() || total <= 0.0 {

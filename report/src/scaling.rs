@@ -11,7 +11,9 @@ use crate::config::{Config, SCALING_ABSOLUTE, SCALING_RELATIVE, SCALING_SWEEP, S
 use crate::exact::SoaLights;
 use crate::measure::{Method, Record};
 use crate::scenes::{self, ShadingPoint};
-use crate::sweep::{build_tree, check_soa, measure_cut, measure_soa, median, recorder, references};
+use crate::sweep::{
+    Bench, build_tree, check_soa, measure_cut, measure_soa, median, recorder, references,
+};
 
 /// One size of the scaling part.
 pub struct ScalingRow {
@@ -56,12 +58,18 @@ pub fn run_scaling(cfg: &Config) -> Result<Vec<ScalingRow>, Box<dyn Error>> {
         );
         let mut records = Vec::new();
         let mut record = recorder("city", n, &mut records);
-        let budget = cfg.budget;
-        let soa_time = measure_soa(&soa, &scene, &points, &refs, budget);
-        record(Method::ExactSoa, "-".into(), soa_time);
+        let bench = Bench {
+            points: &points,
+            refs: &refs,
+            budget: cfg.budget,
+        };
+        record(
+            Method::ExactSoa,
+            "-".into(),
+            measure_soa(&soa, &scene, bench),
+        );
         let cut = |kind, threshold| {
-            let shader = shader.with_bound(kind);
-            measure_cut(&tree, shader, &points, &refs, budget, threshold, unoccluded)
+            measure_cut(&tree, shader.with_bound(kind), bench, threshold, unoccluded)
         };
         let relative = Threshold::relative(SCALING_RELATIVE);
         let m = cut(BoundKind::Paper, relative);

@@ -22,6 +22,18 @@ use crate::measure::{self, Measurement, Method, Record, Sample, measure};
 use crate::sampling::{LightSampler, PowerSampler, TreeSampler};
 use crate::scenes::{self, Scene, ShadingPoint};
 
+/// What every configuration of a scene is measured on: the shading points,
+/// their exact values, and the time budget of the repeated passes.
+#[derive(Clone, Copy)]
+pub struct Bench<'a> {
+    /// The shading points some light reaches.
+    pub points: &'a [ShadingPoint],
+    /// Their exact values.
+    pub refs: &'a [DVec3],
+    /// Time budget of one configuration's repeated passes.
+    pub budget: Duration,
+}
+
 /// Surface of a shading point, as the crate would normalize it.
 #[inline]
 pub fn surface(pt: &ShadingPoint) -> Surface {
@@ -108,16 +120,10 @@ pub fn check_soa(
 }
 
 /// The vectorized exact sum over every light, measured.
-pub fn measure_soa(
-    soa: &SoaLights,
-    scene: &Scene,
-    points: &[ShadingPoint],
-    refs: &[DVec3],
-    budget: Duration,
-) -> Measurement {
+pub fn measure_soa(soa: &SoaLights, scene: &Scene, bench: Bench<'_>) -> Measurement {
     let lights = scene.lights.len() as u32;
-    measure(refs, budget, |i| {
-        let pt = &points[i];
+    measure(bench.refs, bench.budget, |i| {
+        let pt = &bench.points[i];
         let radiance = soa.shade(&scene.material, pt.point, pt.normal, pt.view);
         Sample::estimate(radiance, lights, None)
     })
@@ -135,15 +141,13 @@ pub fn median(mut v: Vec<f64>) -> f64 {
 pub fn measure_cut<S: Shader, V: Visibility>(
     tree: &LightTree,
     shader: S,
-    points: &[ShadingPoint],
-    refs: &[DVec3],
-    budget: Duration,
+    bench: Bench<'_>,
     threshold: Threshold,
     host: Option<&dyn Fn(&ShadingPoint) -> V>,
 ) -> Measurement {
     let mut shading = tree.shading(shader);
-    measure(refs, budget, |i| {
-        let pt = &points[i];
+    measure(bench.refs, bench.budget, |i| {
+        let pt = &bench.points[i];
         let r = match host {
             Some(host) => {
                 shading.shade_view_occluded(pt.point, pt.normal, pt.view, threshold, &mut host(pt))
@@ -154,22 +158,38 @@ pub fn measure_cut<S: Shader, V: Visibility>(
     })
 }
 
-/// A Monte Carlo sampler measured at every sample count, with the same
-/// seed per point for every count; shadow rays through `host(pt)` in an
-/// occluded scene.
-pub fn sample_sweep<L: LightSampler, S: Shader, V: Visibility>(
+/// Both Monte Carlo samplers (power, then down `tree`) measured at every
+/// sample count and recorded, with the same seed per point for every count;
+/// shadow rays through `host(pt)` in an occluded scene.
+pub fn sample_sweeps<S: Shader, V: Visibility>(
+    record: &mut impl FnMut(Method, String, Measurement),
+    tree: &LightTree,
+    shader: &S,
+    bench: Bench<'_>,
+    host: Option<&dyn Fn(&ShadingPoint) -> V>,
+) {
+    let power = PowerSampler::new(tree.lights());
+    for (n, m) in sample_sweep(&power, shader, bench, host) {
+        record(Method::PowerSampling, format!("n={n}"), m);
+    }
+    let tree_sampler = TreeSampler::new(tree);
+    for (n, m) in sample_sweep(&tree_sampler, shader, bench, host) {
+        record(Method::TreeSampling, format!("n={n}"), m);
+    }
+}
+
+/// A Monte Carlo sampler measured at every sample count.
+fn sample_sweep<L: LightSampler, S: Shader, V: Visibility>(
     sampler: &L,
     shader: &S,
-    points: &[ShadingPoint],
-    refs: &[DVec3],
-    budget: Duration,
+    bench: Bench<'_>,
     host: Option<&dyn Fn(&ShadingPoint) -> V>,
 ) -> Vec<(u32, Measurement)> {
     SAMPLE_COUNTS
         .into_iter()
         .map(|n| {
-            let m = measure(refs, budget, |i| {
-                let pt = &points[i];
+            let m = measure(bench.refs, bench.budget, |i| {
+                let pt = &bench.points[i];
                 let mut rng = scenes::rng(SEED ^ ((i as u64) << 20));
                 let s = surface(pt);
                 let (radiance, rays) = match host {
@@ -286,26 +306,20 @@ fn sweep<S: Shader + Copy + Send + Sync>(
 
     let mut rows = Vec::new();
     let mut record = recorder(scene.name, scene.lights.len(), &mut rows);
-    let budget = cfg.budget;
+    let bench = Bench {
+        points: &points,
+        refs: &refs,
+        budget: cfg.budget,
+    };
     record(
         Method::ExactSoa,
         "-".into(),
-        measure_soa(&soa, scene, &points, &refs, budget),
+        measure_soa(&soa, scene, bench),
     );
     // `shade_view` serves Lambert and Lambert + Phong alike (Lambert ignores
     // the view; it costs one normalization).
     let unoccluded = None::<&dyn Fn(&ShadingPoint) -> Unoccluded>;
-    let cut = |kind, threshold| {
-        measure_cut(
-            &tree,
-            make(kind),
-            &points,
-            &refs,
-            budget,
-            threshold,
-            unoccluded,
-        )
-    };
+    let cut = |kind, threshold| measure_cut(&tree, make(kind), bench, threshold, unoccluded);
     for t in PAPER_RELATIVE {
         let m = cut(BoundKind::Paper, Threshold::relative(t));
         record(Method::TreePaper, format!("t={t}"), m);
@@ -324,14 +338,7 @@ fn sweep<S: Shader + Copy + Send + Sync>(
     }
 
     let shader = make(BoundKind::Tight);
-    let power = PowerSampler::new(&scene.lights);
-    for (n, m) in sample_sweep(&power, &shader, &points, &refs, budget, unoccluded) {
-        record(Method::PowerSampling, format!("n={n}"), m);
-    }
-    let tree_sampler = TreeSampler::new(&tree);
-    for (n, m) in sample_sweep(&tree_sampler, &shader, &points, &refs, budget, unoccluded) {
-        record(Method::TreeSampling, format!("n={n}"), m);
-    }
+    sample_sweeps(&mut record, &tree, &shader, bench, unoccluded);
     drop(record);
     Ok(rows)
 }

@@ -84,9 +84,6 @@ pub fn chandelier(lights: usize, points: usize, seed: u64) -> Scene {
         ),
         lights: all,
         points,
-        material: Material {
-            kd: Vec3::new(0.6, 0.5, 0.4),
-            specular: None,
-        },
+        material: Material::diffuse(Vec3::new(0.6, 0.5, 0.4)),
     }
 }

@@ -66,6 +66,13 @@ pub struct Material {
     pub specular: Option<Specular>,
 }
 
+impl Material {
+    /// A diffuse (Lambert) material of albedo `kd`.
+    pub const fn diffuse(kd: Vec3) -> Self {
+        Self { kd, specular: None }
+    }
+}
+
 /// A shading point: position, normal (unit) and view direction (unit,
 /// towards the scene's camera; diffuse scenes ignore it).
 #[derive(Clone, Copy, Debug)]

@@ -307,10 +307,7 @@ pub fn city_shadows(lights: usize, points: usize, seed: u64) -> (Scene, City) {
         ),
         lights: city.lights.clone(),
         points: shading,
-        material: Material {
-            kd: Vec3::splat(0.5),
-            specular: None,
-        },
+        material: Material::diffuse(Vec3::splat(0.5)),
     };
     (scene, city)
 }

@@ -95,10 +95,7 @@ pub fn city(lights: usize, points: usize, seed: u64) -> Scene {
         ),
         lights,
         points,
-        material: Material {
-            kd: Vec3::splat(0.5),
-            specular: None,
-        },
+        material: Material::diffuse(Vec3::splat(0.5)),
     }
 }
 

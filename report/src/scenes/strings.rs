@@ -110,10 +110,7 @@ pub fn strings(lights: usize, points: usize, seed: u64) -> Scene {
         ),
         lights: all,
         points,
-        material: Material {
-            kd: Vec3::splat(0.8),
-            specular: None,
-        },
+        material: Material::diffuse(Vec3::splat(0.8)),
     }
 }
 
