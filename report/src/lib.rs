@@ -11,20 +11,20 @@
 //!   al. 1996 and Conty & Kulla 2018) and [`shadowed`] (the exact shadowed
 //!   sum and Ward 1991); [`measure`], the sweeps ([`config`], [`sweep`],
 //!   [`occluded`], [`scaling`]), [`plot`], [`csv`], [`summary`], and the
-//!   ground scene's table ([`prototype`]).
+//!   ground scene's evaluations-per-point table ([`evaluations`]).
 
 pub mod bvh;
 pub mod camera;
 pub mod compare;
 pub mod config;
 pub mod csv;
+pub mod evaluations;
 pub mod exact;
 pub mod image;
 pub mod measure;
 pub mod occluded;
 pub mod options;
 pub mod plot;
-pub mod prototype;
 pub mod raycast;
 pub mod sampling;
 pub mod scaling;

@@ -7,7 +7,7 @@
 //! cargo run --release -p manylights-report -- city scaling    # only some parts
 //! ```
 //!
-//! Parts: `prototype` (the ground scene's table), `city`, `chandelier`,
+//! Parts: `evaluations` (the ground scene's evaluations per point), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
 //! `city-shadows` (the occluded scene) and `scaling` (time against number of
 //! lights); no part named means all. Writes to `out/report/` under the
@@ -35,17 +35,17 @@ use manylights_report::config::{
     SEED, SHADOW_PER_NODE, SHADOW_RELATIVE, TREE_ABSOLUTE, TREE_RELATIVE, WARD,
 };
 use manylights_report::csv::{write_csv, write_scaling_csv};
+use manylights_report::evaluations::print_evaluations_table;
 use manylights_report::measure::MAX_PASSES;
 use manylights_report::occluded::run_occluded;
 use manylights_report::plot::{plot_scaling, plot_scene};
-use manylights_report::prototype::print_prototype_table;
 use manylights_report::scaling::run_scaling;
 use manylights_report::scenes::city_shadows;
 use manylights_report::summary::summary;
 use manylights_report::sweep::run_scene;
 
 /// The ground scene's table, as a part.
-const PROTOTYPE: &str = "prototype";
+const EVALUATIONS: &str = "evaluations";
 
 fn main() -> Result<(), Box<dyn Error>> {
     let started = Instant::now();
@@ -55,13 +55,13 @@ fn main() -> Result<(), Box<dyn Error>> {
         match arg.as_str() {
             "--quick" => quick = true,
             name if SCENE_NAMES.contains(&name)
-                || [PROTOTYPE, OCCLUDED, SCALING].contains(&name) =>
+                || [EVALUATIONS, OCCLUDED, SCALING].contains(&name) =>
             {
                 parts.push(arg)
             }
             _ => {
                 return Err(format!(
-                    "unknown argument {arg:?}; usage: report [--quick] [{PROTOTYPE} | {} | \
+                    "unknown argument {arg:?}; usage: report [--quick] [{EVALUATIONS} | {} | \
                      {OCCLUDED} | {SCALING}]...",
                     SCENE_NAMES.join(" | ")
                 )
@@ -78,8 +78,8 @@ fn main() -> Result<(), Box<dyn Error>> {
         "# manylights: error against run time{}\n",
         if quick { " (--quick)" } else { "" }
     );
-    if wanted(PROTOTYPE) {
-        print_prototype_table()?;
+    if wanted(EVALUATIONS) {
+        print_evaluations_table()?;
     }
     println!("{METHODS}");
     println!(

@@ -1,4 +1,4 @@
-//! The ground scene of the prototype table: unit white lights uniform in a
+//! The ground scene of the evaluations-per-point table: unit white lights uniform in a
 //! slab 4 to 6 units above a 1000 x 1000 ground, shading points on the
 //! ground facing up.
 

@@ -43,7 +43,7 @@ const ROWS: [(&str, BoundKind, Threshold); 3] = [
 
 /// Prints the table as Markdown; an error if a point breaks its certified
 /// bound.
-pub fn print_prototype_table() -> Result<(), Box<dyn std::error::Error>> {
+pub fn print_evaluations_table() -> Result<(), Box<dyn std::error::Error>> {
     println!("## Ground scene: evaluations per shading point\n");
     println!(
         "| lights | bound | evaluations / point | max actual rel. error | time / point | exact \
