@@ -40,7 +40,7 @@ fn main() -> Result<(), Box<dyn Error>> {
 
     let threshold = Threshold::relative(options.threshold);
     let (results, tree_time) = view.shade(|s, hit| s.shade(hit.point, hit.normal, threshold))?;
-    let (exact, exact_time) = view.shade(|s, hit| s.shade_exact(hit.point, hit.normal))?;
+    let (exact, exact_time) = view.shade(|s, hit| s.exact(hit.point, hit.normal))?;
 
     let stats = ErrorStats::new(&results, &exact);
     println!("city at night, Lambert, no shadows");

@@ -16,7 +16,7 @@
 use std::error::Error;
 
 use glam::{DVec3, Vec3};
-use manylights::{LightTree, Threshold};
+use manylights::{LightTree, Query, Threshold, Unoccluded};
 use manylights_report::camera::Camera;
 use manylights_report::compare::{ErrorStats, print_comparison, print_row, shade_pixels, timed};
 use manylights_report::image::write_comparison;
@@ -44,8 +44,9 @@ fn main() -> Result<(), Box<dyn Error>> {
             &hits,
             || (),
             |_, hit| {
-                let mut shading = tree.shading(hit.shader());
-                shading.shade_view(hit.point, hit.normal, hit.view, threshold)
+                let query = Query::new(hit.point, hit.normal)?.with_view(hit.view)?;
+                tree.shading(hit.shader())
+                    .shade_query(&query, threshold, Unoccluded)
             },
         )
     });
@@ -55,8 +56,8 @@ fn main() -> Result<(), Box<dyn Error>> {
             &hits,
             || (),
             |_, hit| {
-                let shading = tree.shading(hit.shader());
-                shading.shade_exact_view(hit.point, hit.normal, hit.view)
+                let query = Query::new(hit.point, hit.normal)?.with_view(hit.view)?;
+                Ok(tree.shading(hit.shader()).exact_query(&query, Unoccluded))
             },
         )
     });

@@ -54,7 +54,7 @@ fn shade(tree: &LightTree, points: &[Vec3], threshold: Option<Threshold>) -> Vec
     let session = || tree.shading(Lambert::new(Vec3::splat(ALBEDO)));
     let shade = |s: &mut Shading<'_, Lambert>, &p: &Vec3| match threshold {
         Some(t) => s.shade(p, Vec3::Z, t).map(|r| r.radiance),
-        None => s.shade_exact(p, Vec3::Z),
+        None => s.exact(p, Vec3::Z),
     };
     let shaded = points.par_iter().map_init(session, shade);
     shaded

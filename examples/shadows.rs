@@ -18,7 +18,7 @@
 use std::error::Error;
 
 use glam::Vec3;
-use manylights::{ShadeResult, Threshold};
+use manylights::{Query, ShadeResult, Threshold};
 use manylights_report::compare::{ErrorStats, mean_per_pixel, print_comparison, print_row};
 use manylights_report::options::Options;
 use manylights_report::raycast::{CityView, Shot};
@@ -41,13 +41,13 @@ fn main() -> Result<(), Box<dyn Error>> {
     let threshold = Threshold::relative(options.threshold);
     let (shaded, tree_time) = view.shade(|s, hit| {
         let mut host = Shadows::new(&view.city, hit.normal);
-        let r = s.shade_occluded(hit.point, hit.normal, threshold, &mut host)?;
+        let r = s.shade_query(&Query::new(hit.point, hit.normal)?, threshold, &mut host)?;
         Ok((r, host.answers))
     })?;
     let results: Vec<Option<ShadeResult>> = shaded.iter().map(|s| s.map(|s| s.0)).collect();
     let (exact, exact_time) = view.shade(|s, hit| {
-        let mut host = Shadows::new(&view.city, hit.normal);
-        s.shade_exact_occluded(hit.point, hit.normal, &mut host)
+        let host = Shadows::new(&view.city, hit.normal);
+        Ok(s.exact_query(&Query::new(hit.point, hit.normal)?, host))
     })?;
 
     let stats = ErrorStats::new(&results, &exact);

@@ -14,7 +14,7 @@ pub enum BuildError {
         /// Index of the light in the slice given to the builder.
         index: usize,
     },
-    /// A coordinate's magnitude exceeds [`MAX_COORDINATE`](crate::MAX_COORDINATE).
+    /// A coordinate's magnitude exceeds [`PointLight::MAX_COORDINATE`](crate::PointLight::MAX_COORDINATE).
     #[error("light {index}: a coordinate exceeds the supported magnitude {max:e}")]
     PositionOutOfRange {
         /// Index of the light in the slice given to the builder.
@@ -45,6 +45,15 @@ pub enum BuildError {
     /// A builder option is out of its range.
     #[error("invalid builder option: {0}")]
     InvalidOption(&'static str),
+    /// [`LightTree::refit`](crate::LightTree::refit) was given a different
+    /// number of lights than the tree was built with.
+    #[error("refit needs {expected} lights, as the tree was built with, got {got}")]
+    LightCountMismatch {
+        /// Number of lights the tree holds.
+        expected: usize,
+        /// Number of lights given.
+        got: usize,
+    },
 }
 
 /// Why a shading call refused its input.
@@ -54,12 +63,12 @@ pub enum ShadeError {
     /// A coordinate of the shading point is NaN or infinite.
     #[error("shading point is not finite")]
     NonFinitePoint,
-    /// The normal is zero, subnormal-small, NaN or infinite (non-unit normals
-    /// are accepted and normalized).
+    /// The normal is zero, NaN or infinite (any other normal, subnormal ones
+    /// included, is normalized in `f64`).
     #[error("normal is zero or not finite")]
     InvalidNormal,
-    /// The view direction is zero, NaN or infinite (non-unit views are
-    /// accepted and normalized).
+    /// The view direction is zero, NaN or infinite (any other view is
+    /// normalized in `f64`).
     #[error("view direction is zero or not finite")]
     InvalidView,
     /// A threshold is NaN or negative.

@@ -4,14 +4,9 @@ use glam::{DVec3, Vec3};
 
 use crate::ShadeError;
 use crate::geometry::{Cone, Surface};
-use crate::shader::{NodeBound, Shader, ViewIndependent};
+use crate::numeric::SECOND_ORDER_SLACK;
+use crate::shader::{NodeEstimate, Shader, ViewIndependent, colour_or_clamped, try_colour};
 use crate::tree::Node;
-
-/// Relative allowance for `f64` rounding in the second-order estimate: it is
-/// a sum of a handful of products, each within a few ulps; the slack is
-/// applied to the magnitudes of its two terms, so it stays valid when they
-/// cancel. `64 * f64::EPSILON` is about `1.4e-14`.
-pub const SECOND_ORDER_SLACK: f64 = 64.0 * f64::EPSILON;
 
 /// Which node bound a shader uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -100,7 +95,7 @@ pub enum BoundKind {
 /// `min(R - n.(c - p), -z_lo)`. The box is far tighter than the ball for flat
 /// clusters such as street lamps seen from a roof.
 ///
-/// Rounding: cosine bounds are widened by [`COS_SLACK`](crate::COS_SLACK); the second-order
+/// Rounding: cosine bounds are widened by [`COS_SLACK`](crate::numeric::COS_SLACK); the second-order
 /// estimate by [`SECOND_ORDER_SLACK`] of its terms' magnitudes and by
 /// `f32::EPSILON` of the first-order term for the `f32` storage of the offsets;
 /// the quadratic forms of `S` by `f32::EPSILON * trace(S)` for the storage of
@@ -112,12 +107,15 @@ pub struct Lambert {
 }
 
 impl Lambert {
-    /// Diffuse albedo `kd` per channel. Channels that are NaN or negative are
-    /// replaced by 0 (see [`Lambert::try_new`] for an error instead);
-    /// infinite ones are clamped to `f32::MAX`.
+    /// Diffuse albedo `kd` per channel, each finite and `>= 0`.
+    ///
+    /// Debug builds assert that; release builds keep results finite by
+    /// reading NaN or negative channels as 0 and infinite ones as
+    /// `f32::MAX`. [`Lambert::try_new`] returns an error instead.
+    #[must_use]
     pub fn new(kd: Vec3) -> Self {
         Self {
-            kd: sanitize(kd),
+            kd: colour_or_clamped(kd, "kd"),
             kind: BoundKind::Tight,
         }
     }
@@ -127,34 +125,24 @@ impl Lambert {
     /// # Errors
     /// [`ShadeError::InvalidMaterial`].
     pub fn try_new(kd: Vec3) -> Result<Self, ShadeError> {
-        if !kd.is_finite() || kd.min_element() < 0.0 {
-            return Err(ShadeError::InvalidMaterial("kd must be finite and >= 0"));
-        }
-        Ok(Self::new(kd))
+        Ok(Self {
+            kd: try_colour(kd, "kd must be finite and >= 0")?,
+            kind: BoundKind::Tight,
+        })
     }
 
     /// Selects the node bound (default [`BoundKind::Tight`]).
+    #[must_use]
     pub const fn with_bound(mut self, kind: BoundKind) -> Self {
         self.kind = kind;
         self
     }
 
     /// The albedo.
+    #[must_use]
     pub fn kd(&self) -> DVec3 {
         self.kd
     }
-}
-
-/// Replaces NaN and negative channels by 0 and infinities by `f32::MAX`.
-pub(crate) fn sanitize(v: Vec3) -> DVec3 {
-    let f = |x: f32| -> f64 {
-        if x.is_nan() || x < 0.0 {
-            0.0
-        } else {
-            f64::from(x.min(f32::MAX))
-        }
-    };
-    DVec3::new(f(v.x), f(v.y), f(v.z))
 }
 
 /// `e^T S e` for the symmetric matrix stored as `[xx, yy, zz, xy, xz, yz]`.
@@ -172,24 +160,15 @@ fn quadratic_form(s: &[f64; 6], e: DVec3) -> f64 {
 /// coordinates' magnitude).
 #[inline]
 fn box_heights(node: &Node, surface: &Surface) -> (f64, f64) {
-    let b = node.bbox;
-    let (min, max) = (b.min.as_dvec3(), b.max.as_dvec3());
-    let centre = 0.5 * (min + max);
-    let half = 0.5 * (max - min);
-    let n = surface.normal;
-    let middle = n.dot(centre - surface.point);
-    let reach = n.abs().dot(half);
-    let magnitude =
-        centre.abs().max_element() + half.max_element() + surface.point.abs().max_element();
-    let slack = SECOND_ORDER_SLACK * magnitude;
-    (middle - reach - slack, middle + reach + slack)
+    node.aabb
+        .extent_along(surface.point, surface.normal, SECOND_ORDER_SLACK)
 }
 
 impl Shader for Lambert {
-    type Frame = ();
+    type PerPoint = ();
 
     #[inline]
-    fn frame(&self, _surface: &Surface) {}
+    fn prepare(&self, _surface: &Surface) {}
 
     #[inline]
     fn eval(&self, _: &(), surface: &Surface, position: DVec3, intensity: DVec3) -> DVec3 {
@@ -205,7 +184,7 @@ impl Shader for Lambert {
     }
 
     #[inline]
-    fn bound(&self, _: &(), surface: &Surface, node: &Node, cone: &Cone) -> NodeBound {
+    fn bound(&self, _: &(), surface: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
         let n = surface.normal;
         // cos and sin of the angle between the normal and the axis.
         let z = n.dot(cone.axis);
@@ -213,7 +192,7 @@ impl Shader for Lambert {
         let (cos_lo, cos_hi) = cone.cos_range_from(z, sin_c);
         if cos_hi <= 0.0 {
             // The whole ball lies below the tangent plane.
-            return NodeBound::ZERO;
+            return NodeEstimate::ZERO;
         }
         let inv_d = cone.inv_distance;
         let scale = node.intensity * self.kd * (inv_d * inv_d);
@@ -224,13 +203,13 @@ impl Shader for Lambert {
         let lower = scale * (cos_lo.max(0.0) * cone.far_falloff());
         let upper = scale * (cos_hi * inv_rho * inv_rho);
         if self.kind == BoundKind::Paper {
-            return NodeBound::new(virtual_light, lower, upper);
+            return NodeEstimate::new(virtual_light, lower, upper);
         }
         let inv_rho3 = inv_rho * inv_rho * inv_rho;
         let (lowest, highest) = box_heights(node, surface);
         if highest <= 0.0 {
             // The whole box lies at or below the tangent plane.
-            return NodeBound::ZERO;
+            return NodeEstimate::ZERO;
         }
         // A second upper bound on cos/d^2 = z/d^3 over the members:
         // (highest z in the box) / (D - R)^3, much tighter than the paper's
@@ -315,9 +294,9 @@ impl Shader for Lambert {
                 (lo - hi).max_element() <= 1e-9 * upper.max_element(),
                 "disjoint bounds: paper [{lower}, {upper}] second order [{lo2}, {hi2}]"
             );
-            return NodeBound::new(virtual_light, lower, upper);
+            return NodeEstimate::new(virtual_light, lower, upper);
         }
-        NodeBound::new(estimate, lo, hi)
+        NodeEstimate::new(estimate, lo, hi)
     }
 }
 

@@ -26,8 +26,8 @@
 //!
 //! let (p, n) = (Vec3::new(50.0, 50.0, 0.0), Vec3::Z);
 //! let r = shading.shade(p, n, Threshold::relative(0.01))?;
-//! let exact = shading.shade_exact(p, n)?;
-//! assert!((r.radiance - exact).abs().max_element() <= r.error_bound.max_element() * (1.0 + 1e-9));
+//! let exact = shading.exact(p, n)?;
+//! assert!(r.certifies(exact));
 //! assert!(r.error_bound.max_element() <= 0.01 * r.radiance.max_element());
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -45,7 +45,7 @@
 //! ```
 //!
 //! `V_i` is the host's point-to-point visibility (1 without a
-//! [`Visibility`]). Conventions, identical in [`Shading::shade_exact`] and
+//! [`Visibility`]). Conventions, identical in [`Shading::exact_query`] and
 //! every bound:
 //!
 //! * a light exactly on the shading point (`d_i = 0`) contributes 0 (its
@@ -56,8 +56,18 @@
 //! * `n . v < 0` (the eye below the surface): the Phong formula is applied as
 //!   written (see [`Phong`]); hosts flip normals for two-sided shading.
 //!
-//! `shade_exact` sums the model over every light in `f64` with compensated
-//! summation: it is the reference, and nothing else.
+//! [`Shading::exact_query`] (and its one-line form [`Shading::exact`]) sums
+//! the model over every light in `f64` with compensated summation: it is the
+//! reference, and nothing else.
+//!
+//! # Shading a point
+//!
+//! A [`Query`] carries what varies per shading point (point, normal, and a
+//! view for view-dependent shaders), validated once where it is built;
+//! [`Shading::shade_query`] and [`Shading::exact_query`] take it together
+//! with the host's [`Visibility`] ([`Unoccluded`] for none). A query without
+//! a view given to a view-dependent shader such as [`Phong`] does not
+//! compile.
 //!
 //! # The certified bound
 //!
@@ -67,24 +77,27 @@
 //! |radiance_k - exact_k| <= error_bound_k + ROUNDING_ALLOWANCE * exact_k
 //! ```
 //!
+//! ([`ShadeResult::certifies`] checks it; [`ShadeResult::ROUNDING_ALLOWANCE`]
+//! is `1e-9`)
+//!
 //! per channel `k`, provided the host's visibility classification is
 //! conservative ([`Visibility`]). Every node bound rounds its absolute
-//! errors outward ([`COS_SLACK`], [`lambert::SECOND_ORDER_SLACK`], upward
-//! rounding of stored radii and moments), and the cut folds its own `f64`
-//! summation error into the bound; [`ROUNDING_ALLOWANCE`] covers what is
-//! left, the relative rounding of single terms and of the reference sum.
+//! errors outward (the slacks of [`numeric`], upward rounding of stored
+//! radii and moments), and the cut folds its own `f64` summation error into
+//! the bound; the allowance covers what is left, the relative rounding of
+//! single terms and of the reference sum.
 //! When a budget stops the cut before a node whose ball contains the shading
 //! point was refined, the bound is `+inf` (nothing finite is certain there).
 //!
 //! # Supported range
 //!
-//! * Light coordinates: finite, magnitude at most [`MAX_COORDINATE`]
+//! * Light coordinates: finite, magnitude at most [`PointLight::MAX_COORDINATE`]
 //!   (`1e18`); anything else is refused at build time. Shading points: any
 //!   finite `f32`.
 //! * Intensities: finite `f32`, `>= 0` (so up to `3.4e38`); node sums and all
 //!   shading arithmetic are `f64`, so sums of many lights near `f32::MAX`
 //!   neither overflow nor lose the bound.
-//! * Phong exponents `0 ..= 1e6` ([`phong::MAX_EXPONENT`]).
+//! * Phong exponents `0 ..= 1e6` ([`Phong::MAX_EXPONENT`]).
 //! * Results are `f64` ([`glam::DVec3`]). A result is infinite only where the
 //!   model is: never, for finite `f32` inputs, since the closest two distinct
 //!   `f32` points are `1.4e-45` apart and `f32::MAX / (1.4e-45)^2` fits in an
@@ -103,47 +116,30 @@
 
 #![forbid(unsafe_code)]
 
-pub mod build;
-mod cut;
 mod error;
-pub mod geometry;
-pub mod lambert;
+mod geometry;
+mod lambert;
 mod light;
-pub mod phong;
+pub mod numeric;
+mod phong;
 mod shader;
+mod shading;
 mod tree;
-mod validate;
 mod visibility;
 
-pub use build::TreeBuilder;
-pub use cut::{ShadeResult, Shading, Stop, Target, Threshold};
 pub use error::{BuildError, ShadeError, ValidationError};
-pub use geometry::{COS_SLACK, Cone, MIN_CLEARANCE, Surface};
+pub use geometry::{Aabb, Cone, Surface};
 pub use lambert::{BoundKind, Lambert};
 pub use light::PointLight;
 pub use phong::Phong;
-pub use shader::{Combined, NodeBound, Shader, ViewIndependent};
-pub use tree::{Aabb, LightTree, Node};
-pub use visibility::{Coverage, NodeBounds, Unoccluded, Visibility};
+pub use shader::{Combined, NodeEstimate, Shader, ViewIndependent};
+pub use shading::{
+    Accepts, NoView, Query, ShadeResult, Shading, Stop, Target, Threshold, WithView,
+};
+pub use tree::{LightTree, Node, TreeBuilder};
+pub use visibility::{Coverage, NodeRegion, Unoccluded, Visibility};
 
 // The README's code blocks are compiled and run as doc tests.
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 struct ReadmeDoctests;
-
-/// Largest supported magnitude of a light coordinate. It keeps squared
-/// distances between lights (at most `(2e18)^2 * 3 = 1.2e37`) within `f32`,
-/// where node second moments are stored.
-pub const MAX_COORDINATE: f32 = 1e18;
-
-/// Relative rounding allowance of the certified-bound contract:
-/// `|radiance - exact| <= error_bound + ROUNDING_ALLOWANCE * exact` per
-/// channel.
-///
-/// What it covers: the relative rounding of single terms (a light's `f64`
-/// evaluation is within about `1e-15` relative; a Phong lobe computed as
-/// `exp(e ln cos)` within `|e ln cos| * 2^-52 <= 2.5e-13`), relative rounding
-/// of node interval ends computed in `f64` (likewise `<= 1e-12`), and the
-/// reference sum's own error (compensated, about `2^-52`). `1e-9` leaves a
-/// margin of 1000 over the largest of these.
-pub const ROUNDING_ALLOWANCE: f64 = 1e-9;

@@ -8,7 +8,7 @@ use glam::Vec3;
 /// squared distance): a light at distance `d` straight above a diffuse surface
 /// of albedo `kd` contributes `intensity * kd / d^2` (see the crate docs for the
 /// full model). Every channel must be finite and `>= 0`, and every coordinate
-/// finite with magnitude at most [`MAX_COORDINATE`](crate::MAX_COORDINATE);
+/// finite with magnitude at most [`PointLight::MAX_COORDINATE`];
 /// [`LightTree::build`](crate::LightTree::build) rejects anything else with a
 /// [`BuildError`](crate::BuildError) naming the light.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -20,6 +20,11 @@ pub struct PointLight {
 }
 
 impl PointLight {
+    /// Largest supported magnitude of a light coordinate. It keeps squared
+    /// distances between lights (at most `(2e18)^2 * 3 = 1.2e37`) within
+    /// `f32`, where node second moments are stored.
+    pub const MAX_COORDINATE: f32 = 1e18;
+
     /// A light at `position` with RGB `intensity`.
     pub const fn new(position: Vec3, intensity: Vec3) -> Self {
         Self {
@@ -36,6 +41,7 @@ impl PointLight {
     /// `k`, which lets one scalar-weighted second moment bound the per-channel
     /// second moments (see [`Lambert`](crate::Lambert)). For grey lights it is
     /// the common channel value.
+    #[must_use]
     pub fn weight(&self) -> f32 {
         self.intensity.max_element()
     }

@@ -4,14 +4,8 @@ use glam::{DVec3, Vec3};
 
 use crate::ShadeError;
 use crate::geometry::{Cone, Surface};
-use crate::lambert::sanitize;
-use crate::shader::{NodeBound, Shader};
+use crate::shader::{NodeEstimate, Shader, colour_or_clamped, try_colour};
 use crate::tree::Node;
-
-/// Largest supported Phong exponent. Exponents above it are clamped (and
-/// [`Phong::try_new`] refuses them); `1e6` already makes a lobe narrower than
-/// 0.1 degree at half maximum.
-pub const MAX_EXPONENT: f64 = 1e6;
 
 /// Below this value `cos^e` is computed together with its scale factor in
 /// log space, so that a lobe value that would underflow `f64` on its own but
@@ -54,18 +48,33 @@ pub struct Phong {
 }
 
 impl Phong {
-    /// Specular colour `ks` and exponent `e`. NaN or negative channels of
-    /// `ks` become 0, infinite ones `f32::MAX`; a NaN or negative exponent
-    /// becomes 0 and one above [`MAX_EXPONENT`] is clamped (see
-    /// [`Phong::try_new`] for an error instead).
+    /// Largest supported exponent. Exponents above it are clamped by
+    /// [`Phong::new`] and refused by [`Phong::try_new`]; `1e6` already makes
+    /// a lobe narrower than 0.1 degree at half maximum.
+    pub const MAX_EXPONENT: f64 = 1e6;
+
+    /// Specular colour `ks` (each channel finite and `>= 0`) and exponent
+    /// `e` in `[0, MAX_EXPONENT]`.
+    ///
+    /// Debug builds assert that the colour is valid and the exponent is not
+    /// NaN or negative; release builds keep results finite by reading NaN or
+    /// negative channels (and exponents) as 0 and infinite channels as
+    /// `f32::MAX`. Exponents above [`MAX_EXPONENT`](Self::MAX_EXPONENT) are
+    /// clamped in every build. [`Phong::try_new`] returns an error instead.
+    #[must_use]
     pub fn new(ks: Vec3, exponent: f32) -> Self {
         let e = f64::from(exponent);
+        debug_assert!(
+            e >= 0.0,
+            "Phong exponent must be >= 0, got {e} (use try_new for an error)"
+        );
         Self {
-            ks: sanitize(ks),
-            exponent: if e.is_nan() || e < 0.0 {
+            ks: colour_or_clamped(ks, "ks"),
+            // `+ 0.0` also turns -0.0 into +0.0.
+            exponent: if e.is_nan() {
                 0.0
             } else {
-                e.min(MAX_EXPONENT)
+                e.clamp(0.0, Self::MAX_EXPONENT) + 0.0
             },
         }
     }
@@ -76,23 +85,28 @@ impl Phong {
     /// [`ShadeError::InvalidMaterial`] for a NaN, infinite or negative
     /// channel of `ks`, or an exponent outside `[0, MAX_EXPONENT]`.
     pub fn try_new(ks: Vec3, exponent: f32) -> Result<Self, ShadeError> {
-        if !ks.is_finite() || ks.min_element() < 0.0 {
-            return Err(ShadeError::InvalidMaterial("ks must be finite and >= 0"));
-        }
-        if !(0.0..=MAX_EXPONENT).contains(&f64::from(exponent)) {
+        let ks = try_colour(ks, "ks must be finite and >= 0")?;
+        let e = f64::from(exponent);
+        if !(0.0..=Self::MAX_EXPONENT).contains(&e) {
             return Err(ShadeError::InvalidMaterial(
                 "exponent must lie in [0, MAX_EXPONENT]",
             ));
         }
-        Ok(Self::new(ks, exponent))
+        // `+ 0.0` turns an exponent of -0.0 into +0.0.
+        Ok(Self {
+            ks,
+            exponent: e + 0.0,
+        })
     }
 
     /// The specular colour.
+    #[must_use]
     pub fn ks(&self) -> DVec3 {
         self.ks
     }
 
     /// The exponent.
+    #[must_use]
     pub fn exponent(&self) -> f64 {
         self.exponent
     }
@@ -125,10 +139,10 @@ impl Phong {
 
 impl Shader for Phong {
     /// The unit mirror direction `r`.
-    type Frame = DVec3;
+    type PerPoint = DVec3;
 
     #[inline]
-    fn frame(&self, surface: &Surface) -> DVec3 {
+    fn prepare(&self, surface: &Surface) -> DVec3 {
         let n = surface.normal;
         let v = surface.view;
         (2.0 * n.dot(v) * n - v).normalize_or_zero()
@@ -146,14 +160,14 @@ impl Shader for Phong {
     }
 
     #[inline]
-    fn bound(&self, r: &DVec3, _surface: &Surface, node: &Node, cone: &Cone) -> NodeBound {
+    fn bound(&self, r: &DVec3, _surface: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
         let (cos_lo, cos_hi) = cone.cos_range(*r);
         if cos_hi <= 0.0 {
-            return NodeBound::ZERO;
+            return NodeEstimate::ZERO;
         }
         let inv_d = cone.inv_distance;
         let scale = node.intensity * self.ks * (inv_d * inv_d);
-        NodeBound::new(
+        NodeEstimate::new(
             self.lobe(scale, r.dot(cone.axis)),
             self.lobe(scale * cone.far_falloff(), cos_lo),
             self.lobe(scale * cone.near_falloff(), cos_hi),

@@ -1,12 +1,14 @@
 //! The `Shader` trait: exact evaluation of one light, a certified bound for a
 //! node.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
+use crate::ShadeError;
 use crate::geometry::{Cone, Surface};
 use crate::tree::Node;
 
-/// A certified estimate of a node's contribution, per RGB channel.
+/// A node's estimated contribution with a certified interval around it, per
+/// RGB channel.
 ///
 /// Contract: for every channel `k`, the exact contribution of the node's
 /// lights (as [`Shader::eval`] summed over them would give in exact
@@ -14,10 +16,10 @@ use crate::tree::Node;
 /// `lower[k] <= estimate[k] <= upper[k]`. The node's error is then at most
 /// `max(estimate - lower, upper - estimate)` per channel. Rounding: relative
 /// errors of order `1e-12` in the three values are allowed (the crate's
-/// [`ROUNDING_ALLOWANCE`](crate::ROUNDING_ALLOWANCE) absorbs them), absolute
+/// [`ROUNDING_ALLOWANCE`](crate::ShadeResult::ROUNDING_ALLOWANCE) absorbs them), absolute
 /// ones are not: where a value can cancel, widen it.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NodeBound {
+pub struct NodeEstimate {
     /// The estimate used for the node.
     pub estimate: DVec3,
     /// Certified lower bound (per channel).
@@ -27,7 +29,7 @@ pub struct NodeBound {
     pub upper: DVec3,
 }
 
-impl NodeBound {
+impl NodeEstimate {
     /// A node that contributes nothing, with no error.
     pub const ZERO: Self = Self {
         estimate: DVec3::ZERO,
@@ -38,12 +40,14 @@ impl NodeBound {
     /// Error of the estimate per channel: `max(estimate - lower, upper -
     /// estimate)`.
     #[inline]
+    #[must_use]
     pub fn error(&self) -> DVec3 {
         (self.estimate - self.lower).max(self.upper - self.estimate)
     }
 
     /// The interval `[lower, upper]` with `estimate` clamped into it.
     #[inline]
+    #[must_use]
     pub fn new(estimate: DVec3, lower: DVec3, upper: DVec3) -> Self {
         Self {
             estimate: estimate.clamp(lower, upper.max(lower)),
@@ -56,15 +60,17 @@ impl NodeBound {
 /// A reflectance model with a bound for groups of lights.
 ///
 /// An implementation gives the exact contribution of one point light and a
-/// certified [`NodeBound`] for a whole node of the [`LightTree`](crate::LightTree)
+/// certified [`NodeEstimate`] for a whole node of the [`LightTree`](crate::LightTree)
 /// from the node's stored data alone. The crate's cut (see
 /// [`Shading`](crate::Shading)) refines nodes until the bounds meet the
 /// requested threshold, and is only as certified as the bounds: a custom
-/// shader must guarantee [`NodeBound`]'s contract for every node whose
+/// shader must guarantee [`NodeEstimate`]'s contract for every node whose
 /// [`Cone`] exists (nodes whose ball reaches the shading point have no cone
 /// and are always refined).
 ///
-/// Everything is computed in `f64`. Implementations that need no view
+/// Everything is computed in `f64`. Per shading point the shader derives
+/// what it needs once ([`prepare`](Self::prepare), e.g. Phong's mirror
+/// direction) and gets it back in every call. Implementations that need no view
 /// direction also implement the marker [`ViewIndependent`], which unlocks the
 /// view-less shading calls.
 ///
@@ -77,22 +83,28 @@ impl NodeBound {
 pub trait Shader {
     /// Per-shading-point data the shader derives once per call (for Phong,
     /// the mirror direction), passed back to `eval` and `bound`.
-    type Frame: Copy;
+    type PerPoint: Copy;
 
     /// Derives the per-point data.
-    fn frame(&self, surface: &Surface) -> Self::Frame;
+    fn prepare(&self, surface: &Surface) -> Self::PerPoint;
 
     /// Exact RGB contribution of one light of `intensity` at `position`.
     fn eval(
         &self,
-        frame: &Self::Frame,
+        point: &Self::PerPoint,
         surface: &Surface,
         position: DVec3,
         intensity: DVec3,
     ) -> DVec3;
 
     /// Certified bound for all lights of `node`, seen under `cone`.
-    fn bound(&self, frame: &Self::Frame, surface: &Surface, node: &Node, cone: &Cone) -> NodeBound;
+    fn bound(
+        &self,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        node: &Node,
+        cone: &Cone,
+    ) -> NodeEstimate;
 }
 
 /// Marker for shaders whose result does not depend on the view direction
@@ -114,36 +126,43 @@ pub struct Combined<A, B> {
 
 impl<A, B> Combined<A, B> {
     /// `first + second`.
+    #[must_use]
     pub const fn new(first: A, second: B) -> Self {
         Self { first, second }
     }
 }
 
 impl<A: Shader, B: Shader> Shader for Combined<A, B> {
-    type Frame = (A::Frame, B::Frame);
+    type PerPoint = (A::PerPoint, B::PerPoint);
 
     #[inline]
-    fn frame(&self, surface: &Surface) -> Self::Frame {
-        (self.first.frame(surface), self.second.frame(surface))
+    fn prepare(&self, surface: &Surface) -> Self::PerPoint {
+        (self.first.prepare(surface), self.second.prepare(surface))
     }
 
     #[inline]
     fn eval(
         &self,
-        frame: &Self::Frame,
+        point: &Self::PerPoint,
         surface: &Surface,
         position: DVec3,
         intensity: DVec3,
     ) -> DVec3 {
-        self.first.eval(&frame.0, surface, position, intensity)
-            + self.second.eval(&frame.1, surface, position, intensity)
+        self.first.eval(&point.0, surface, position, intensity)
+            + self.second.eval(&point.1, surface, position, intensity)
     }
 
     #[inline]
-    fn bound(&self, frame: &Self::Frame, surface: &Surface, node: &Node, cone: &Cone) -> NodeBound {
-        let a = self.first.bound(&frame.0, surface, node, cone);
-        let b = self.second.bound(&frame.1, surface, node, cone);
-        NodeBound {
+    fn bound(
+        &self,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        node: &Node,
+        cone: &Cone,
+    ) -> NodeEstimate {
+        let a = self.first.bound(&point.0, surface, node, cone);
+        let b = self.second.bound(&point.1, surface, node, cone);
+        NodeEstimate {
             estimate: a.estimate + b.estimate,
             lower: a.lower + b.lower,
             upper: a.upper + b.upper,
@@ -152,3 +171,30 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
 }
 
 impl<A: ViewIndependent, B: ViewIndependent> ViewIndependent for Combined<A, B> {}
+
+/// The colour for a convenience constructor: `debug_assert!`s that it is
+/// valid; a release build keeps results finite by reading NaN and negative
+/// channels as 0 and infinite ones as `f32::MAX`.
+pub(crate) fn colour_or_clamped(v: Vec3, what: &'static str) -> DVec3 {
+    debug_assert!(
+        v.is_finite() && v.min_element() >= 0.0,
+        "{what} must be finite and >= 0 per channel, got {v} (use try_new for an error)"
+    );
+    let f = |x: f32| -> f64 {
+        if x.is_nan() || x < 0.0 {
+            0.0
+        } else {
+            f64::from(x.min(f32::MAX))
+        }
+    };
+    DVec3::new(f(v.x), f(v.y), f(v.z))
+}
+
+/// [`ShadeError::InvalidMaterial`] for a colour that is not finite and `>= 0`.
+pub(crate) fn try_colour(v: Vec3, message: &'static str) -> Result<DVec3, ShadeError> {
+    if v.is_finite() && v.min_element() >= 0.0 {
+        Ok(v.as_dvec3())
+    } else {
+        Err(ShadeError::InvalidMaterial(message))
+    }
+}

@@ -2,7 +2,7 @@
 
 use glam::Vec3;
 
-use crate::tree::Aabb;
+use crate::geometry::Aabb;
 
 /// How much of a node the host sees from the shading point.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -18,9 +18,11 @@ pub enum Coverage {
     Partial,
 }
 
-/// What the cut tells the host about a node it asks to classify.
+/// The region of space a node's lights occupy, as the cut describes it to
+/// the host when it asks for a classification.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NodeBounds {
+#[non_exhaustive]
+pub struct NodeRegion {
     /// Index of the node in [`LightTree::nodes`](crate::LightTree::nodes).
     pub index: u32,
     /// Tight box of the node's lights.
@@ -58,7 +60,7 @@ pub trait Visibility {
     const ALWAYS_VISIBLE: bool = false;
 
     /// Classifies `node`'s box as seen from `point`.
-    fn classify(&mut self, point: Vec3, node: &NodeBounds) -> Coverage;
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage;
 
     /// Whether the segment from `point` to a light at `light` is unoccluded.
     fn visible(&mut self, point: Vec3, light: Vec3) -> bool;
@@ -66,7 +68,7 @@ pub trait Visibility {
     /// Optional estimate of the visible fraction of a partially occluded
     /// node, in `[0, 1]`. The default, `None`, makes the cut use the middle of
     /// the certified interval `[0, upper]`.
-    fn visible_fraction(&mut self, point: Vec3, node: &NodeBounds) -> Option<f32> {
+    fn visible_fraction(&mut self, point: Vec3, node: &NodeRegion) -> Option<f32> {
         let _ = (point, node);
         None
     }
@@ -80,7 +82,7 @@ impl Visibility for Unoccluded {
     const ALWAYS_VISIBLE: bool = true;
 
     #[inline(always)]
-    fn classify(&mut self, _point: Vec3, _node: &NodeBounds) -> Coverage {
+    fn classify(&mut self, _point: Vec3, _node: &NodeRegion) -> Coverage {
         Coverage::Visible
     }
 
@@ -94,7 +96,7 @@ impl<V: Visibility> Visibility for &mut V {
     const ALWAYS_VISIBLE: bool = V::ALWAYS_VISIBLE;
 
     #[inline]
-    fn classify(&mut self, point: Vec3, node: &NodeBounds) -> Coverage {
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
         (**self).classify(point, node)
     }
 
@@ -104,7 +106,7 @@ impl<V: Visibility> Visibility for &mut V {
     }
 
     #[inline]
-    fn visible_fraction(&mut self, point: Vec3, node: &NodeBounds) -> Option<f32> {
+    fn visible_fraction(&mut self, point: Vec3, node: &NodeRegion) -> Option<f32> {
         (**self).visible_fraction(point, node)
     }
 }

@@ -6,12 +6,12 @@ mod common;
 use common::*;
 use glam::Vec3;
 use manylights::{
-    BoundKind, Combined, Cone, Lambert, LightTree, Phong, ROUNDING_ALLOWANCE, Shader, Shading,
-    Stop, Threshold,
+    BoundKind, Combined, Lambert, LightTree, Phong, Query, ShadeResult, Shader, Shading, Stop,
+    Threshold, Unoccluded,
 };
 use proptest::prelude::*;
 
-/// Phong exponents from 0 to 10^6, all property-tested.
+/// Phong exponents from the constant lobe to the sharpest supported, all property-tested.
 const EXPONENTS: [f32; 6] = [0.0, 1.0, 10.0, 100.0, 1e4, 1e6];
 
 /// 96 cases per property in CI; `PROPTEST_CASES=N` overrides it for long
@@ -48,7 +48,8 @@ fn check_point<S: Shader>(
     prop_assert_eq!(zero.stop, Stop::ThresholdMet);
     for k in 0..3 {
         prop_assert!(
-            (zero.radiance[k] - exact[k]).abs() <= 2.0 * ROUNDING_ALLOWANCE * exact[k] + 1e-300,
+            (zero.radiance[k] - exact[k]).abs()
+                <= 2.0 * ShadeResult::ROUNDING_ALLOWANCE * exact[k] + 1e-300,
             "threshold 0 is not exact: {} vs {}",
             zero.radiance,
             exact
@@ -60,7 +61,7 @@ fn check_point<S: Shader>(
     // The root alone, unless its ball reaches the shading point (then it has
     // no finite bound and must be refined whatever the threshold).
     let root = shading.tree().root().unwrap();
-    if root.light_count() == 1 || Cone::new(point.as_dvec3(), root).is_some() {
+    if root.light_count() == 1 || root.cone(point.as_dvec3()).is_some() {
         prop_assert!(
             inf.nodes_evaluated + inf.lights_evaluated <= 1,
             "infinite threshold refined: {inf:?}"
@@ -85,7 +86,7 @@ proptest! {
         prop_assert_eq!(tree.validate(), Ok(()));
         let kind = if paper { BoundKind::Paper } else { BoundKind::Tight };
         let mut shading = tree.shading(Lambert::new(kd).with_bound(kind));
-        let exact = shading.shade_exact(p, n).unwrap();
+        let exact = shading.exact(p, n).unwrap();
         check_point(&mut shading, |s, t| s.shade(p, n, t).unwrap(), exact, t, p)?;
     }
 
@@ -102,8 +103,8 @@ proptest! {
         let tree = LightTree::build(&lights).unwrap();
         prop_assert_eq!(tree.validate(), Ok(()));
         let mut shading = tree.shading(Phong::new(ks, e));
-        let exact = shading.shade_exact_view(p, n, v).unwrap();
-        check_point(&mut shading, |s, t| s.shade_view(p, n, v, t).unwrap(), exact, t, p)?;
+        let exact = shading.exact_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), Unoccluded);
+        check_point(&mut shading, |s, t| s.shade_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), t, Unoccluded).unwrap(), exact, t, p)?;
     }
 
     #[test]
@@ -119,8 +120,8 @@ proptest! {
     ) {
         let tree = LightTree::build(&lights).unwrap();
         let mut shading = tree.shading(Combined::new(Lambert::new(kd), Phong::new(ks, e)));
-        let exact = shading.shade_exact_view(p, n, v).unwrap();
-        check_point(&mut shading, |s, t| s.shade_view(p, n, v, t).unwrap(), exact, t, p)?;
+        let exact = shading.exact_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), Unoccluded);
+        check_point(&mut shading, |s, t| s.shade_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), t, Unoccluded).unwrap(), exact, t, p)?;
     }
 
     /// Shading points on a receiving plane under lights above it: the layout
@@ -140,7 +141,7 @@ proptest! {
         let tree = LightTree::build(&lifted).unwrap();
         let mut shading = tree.shading(Lambert::new(kd));
         let (p, n) = (Vec3::new(x, y, 0.0), Vec3::Z + tilt);
-        let exact = shading.shade_exact(p, n).unwrap();
+        let exact = shading.exact(p, n).unwrap();
         check_point(&mut shading, |s, t| s.shade(p, n, t).unwrap(), exact, t, p)?;
     }
 
@@ -157,10 +158,10 @@ proptest! {
     ) {
         let tree = LightTree::build(&lights).unwrap();
         let mut shading = tree.shading(Phong::new(Vec3::ONE, 50.0));
-        let exact = shading.shade_exact_view(p, n, v).unwrap();
+        let exact = shading.exact_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), Unoccluded);
         let cap = 10f64.powf(m);
         let t = Threshold::absolute(f64::INFINITY).with_max_contribution(cap);
-        let r = shading.shade_view(p, n, v, t).unwrap();
+        let r = shading.shade_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), t, Unoccluded).unwrap();
         check_bound(&r, exact)?;
         prop_assert!(r.error_bound.max_element() <= cap * f64::from(r.nodes_evaluated) * (1.0 + 1e-9) + 1e-300);
     }

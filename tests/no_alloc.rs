@@ -5,7 +5,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::Vec3;
-use manylights::{Combined, Lambert, LightTree, Phong, PointLight, Threshold};
+use manylights::{Combined, Lambert, LightTree, Phong, PointLight, Query, Threshold, Unoccluded};
 
 struct Counting;
 
@@ -60,7 +60,13 @@ fn shading_does_not_allocate_once_warmed() {
     for &p in &points {
         for &t in &thresholds {
             diffuse.shade(p, Vec3::Z, t).unwrap();
-            glossy.shade_view(p, Vec3::Z, view, t).unwrap();
+            glossy
+                .shade_query(
+                    &Query::new(p, Vec3::Z).unwrap().with_view(view).unwrap(),
+                    t,
+                    Unoccluded,
+                )
+                .unwrap();
         }
     }
     let before = ALLOCATIONS.load(Ordering::Relaxed);
@@ -68,7 +74,16 @@ fn shading_does_not_allocate_once_warmed() {
     for &p in &points {
         for &t in &thresholds {
             cost += u64::from(diffuse.shade(p, Vec3::Z, t).unwrap().cost());
-            cost += u64::from(glossy.shade_view(p, Vec3::Z, view, t).unwrap().cost());
+            cost += u64::from(
+                glossy
+                    .shade_query(
+                        &Query::new(p, Vec3::Z).unwrap().with_view(view).unwrap(),
+                        t,
+                        Unoccluded,
+                    )
+                    .unwrap()
+                    .cost(),
+            );
         }
     }
     let after = ALLOCATIONS.load(Ordering::Relaxed);

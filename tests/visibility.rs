@@ -16,8 +16,8 @@ mod common;
 use common::{check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::{DVec3, Vec3};
 use manylights::{
-    Aabb, Coverage, Lambert, LightTree, NodeBounds, Phong, PointLight, ROUNDING_ALLOWANCE,
-    ShadeResult, Stop, Threshold, Unoccluded, Visibility,
+    Aabb, Coverage, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeResult, Stop,
+    Threshold, Unoccluded, Visibility,
 };
 use manylights_report::bvh::corners;
 use proptest::prelude::*;
@@ -126,7 +126,7 @@ impl Visibility for Occluders {
     ///   node's box. Each blocked segment passes at least [`MARGIN`] deep
     ///   inside the unshrunk occluder, so `visible` says blocked too.
     /// * `Partial` otherwise.
-    fn classify(&mut self, point: Vec3, node: &NodeBounds) -> Coverage {
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
         let (p, lo, hi) = (
             point.as_dvec3(),
             node.aabb.min.as_dvec3(),
@@ -163,7 +163,7 @@ impl Visibility for Occluders {
         !self.blocked(point, light)
     }
 
-    fn visible_fraction(&mut self, point: Vec3, node: &NodeBounds) -> Option<f32> {
+    fn visible_fraction(&mut self, point: Vec3, node: &NodeRegion) -> Option<f32> {
         match self.fraction {
             Fraction::Default => None,
             Fraction::Constant(f) => Some(f),
@@ -181,7 +181,7 @@ impl Visibility for Occluders {
 struct Unsure(Occluders);
 
 impl Visibility for Unsure {
-    fn classify(&mut self, _point: Vec3, _node: &NodeBounds) -> Coverage {
+    fn classify(&mut self, _point: Vec3, _node: &NodeRegion) -> Coverage {
         Coverage::Partial
     }
 
@@ -226,7 +226,7 @@ fn check_exact(r: &ShadeResult, exact: DVec3) -> Result<(), TestCaseError> {
     prop_assert_eq!(r.stop, Stop::ThresholdMet);
     for k in 0..3 {
         prop_assert!(
-            (r.radiance[k] - exact[k]).abs() <= ROUNDING_ALLOWANCE * exact[k],
+            (r.radiance[k] - exact[k]).abs() <= ShadeResult::ROUNDING_ALLOWANCE * exact[k],
             "threshold 0 with occluders is not the shadowed sum: {} vs {}",
             r.radiance,
             exact
@@ -296,12 +296,15 @@ fn lambert_bound_holds_in_the_street() -> Result<(), TestCaseError> {
     let mut shading = tree.shading(Lambert::new(Vec3::new(0.8, 0.7, 0.6)));
     let mut answers = [0; 3];
     for (p, n) in street_points() {
-        let exact = shading
-            .shade_exact_occluded(p, n, &mut Occluders::new(walls.clone()))
-            .unwrap();
+        let exact = shading.exact_query(
+            &Query::new(p, n).unwrap(),
+            &mut Occluders::new(walls.clone()),
+        );
         for t in street_thresholds() {
             let mut host = Occluders::new(walls.clone());
-            let r = shading.shade_occluded(p, n, t, &mut host).unwrap();
+            let r = shading
+                .shade_query(&Query::new(p, n).unwrap(), t, &mut host)
+                .unwrap();
             check_bound(&r, exact)?;
             check_threshold(&r, &t)?;
             check_counters(&r, &host)?;
@@ -324,12 +327,19 @@ fn phong_bound_holds_in_the_street() -> Result<(), TestCaseError> {
         let mut shading = tree.shading(Phong::new(Vec3::splat(0.5), exponent));
         for (p, n) in street_points() {
             let v = eye - p;
-            let exact = shading
-                .shade_exact_view_occluded(p, n, v, &mut Occluders::new(walls.clone()))
-                .unwrap();
+            let exact = shading.exact_query(
+                &Query::new(p, n).unwrap().with_view(v).unwrap(),
+                &mut Occluders::new(walls.clone()),
+            );
             for t in street_thresholds() {
                 let mut host = Occluders::new(walls.clone());
-                let r = shading.shade_view_occluded(p, n, v, t, &mut host).unwrap();
+                let r = shading
+                    .shade_query(
+                        &Query::new(p, n).unwrap().with_view(v).unwrap(),
+                        t,
+                        &mut host,
+                    )
+                    .unwrap();
                 check_bound(&r, exact)?;
                 check_threshold(&r, &t)?;
                 check_counters(&r, &host)?;
@@ -346,10 +356,11 @@ fn occlusion_changes_the_street() {
     let tree = LightTree::build(&lights).unwrap();
     let shading = tree.shading(Lambert::new(Vec3::ONE));
     let shadowed = street_points().into_iter().filter(|&(p, n)| {
-        let open = shading.shade_exact(p, n).unwrap();
-        let shut = shading
-            .shade_exact_occluded(p, n, &mut Occluders::new(walls.clone()))
-            .unwrap();
+        let open = shading.exact(p, n).unwrap();
+        let shut = shading.exact_query(
+            &Query::new(p, n).unwrap(),
+            &mut Occluders::new(walls.clone()),
+        );
         shut.max_element() < 0.9 * open.max_element()
     });
     assert!(shadowed.count() >= 20);
@@ -369,20 +380,32 @@ fn unoccluded_is_shade_bit_for_bit() {
     for (p, n) in street_points() {
         for t in street_thresholds() {
             let plain = lambert.shade(p, n, t).unwrap();
-            let occluded = lambert.shade_occluded(p, n, t, &mut Unoccluded).unwrap();
+            let occluded = lambert
+                .shade_query(&Query::new(p, n).unwrap(), t, &mut Unoccluded)
+                .unwrap();
             assert_eq!(plain, occluded);
             assert_eq!((occluded.classify_queries, occluded.point_queries), (0, 0));
 
-            let plain = phong.shade_view(p, n, v, t).unwrap();
+            let plain = phong
+                .shade_query(
+                    &Query::new(p, n).unwrap().with_view(v).unwrap(),
+                    t,
+                    Unoccluded,
+                )
+                .unwrap();
             let occluded = phong
-                .shade_view_occluded(p, n, v, t, &mut Unoccluded)
+                .shade_query(
+                    &Query::new(p, n).unwrap().with_view(v).unwrap(),
+                    t,
+                    &mut Unoccluded,
+                )
                 .unwrap();
             assert_eq!(plain, occluded);
             assert_eq!((occluded.classify_queries, occluded.point_queries), (0, 0));
         }
         assert_eq!(
-            lambert.shade_exact(p, n).unwrap(),
-            lambert.shade_exact_occluded(p, n, &mut Unoccluded).unwrap()
+            lambert.exact(p, n).unwrap(),
+            lambert.exact_query(&Query::new(p, n).unwrap(), &mut Unoccluded)
         );
     }
 }
@@ -406,7 +429,11 @@ fn fully_occluded_tree_is_zero_with_zero_error() {
     for t in street_thresholds().into_iter().chain([Threshold::exact()]) {
         let mut host = Occluders::new(ceiling.clone());
         let r = shading
-            .shade_occluded(Vec3::new(1.5, -2.0, 0.0), Vec3::Z, t, &mut host)
+            .shade_query(
+                &Query::new(Vec3::new(1.5, -2.0, 0.0), Vec3::Z).unwrap(),
+                t,
+                &mut host,
+            )
             .unwrap();
         assert_eq!(r.radiance, DVec3::ZERO);
         assert_eq!(r.error_bound, DVec3::ZERO);
@@ -431,10 +458,11 @@ fn occluded_cluster_is_dropped_without_point_queries() {
     let tree = LightTree::build(&lights).unwrap();
     let mut shading = tree.shading(Lambert::new(Vec3::ONE));
     let (p, n) = (Vec3::new(0.0, 0.0, 0.0), Vec3::Z);
-    let exact = shading
-        .shade_exact_occluded(p, n, &mut Occluders::new(wall.clone()))
-        .unwrap();
-    let open = shading.shade_exact(p, n).unwrap();
+    let exact = shading.exact_query(
+        &Query::new(p, n).unwrap(),
+        &mut Occluders::new(wall.clone()),
+    );
+    let open = shading.exact(p, n).unwrap();
     assert!(
         exact.max_element() < 0.6 * open.max_element(),
         "the wall casts no shadow"
@@ -442,7 +470,7 @@ fn occluded_cluster_is_dropped_without_point_queries() {
 
     let mut host = Occluders::new(wall);
     let r = shading
-        .shade_occluded(p, n, Threshold::exact(), &mut host)
+        .shade_query(&Query::new(p, n).unwrap(), Threshold::exact(), &mut host)
         .unwrap();
     check_exact(&r, exact).unwrap();
     assert!(host.answers[1] > 0, "no node classified occluded");
@@ -465,18 +493,23 @@ fn threshold_zero_is_the_shadowed_sum() -> Result<(), TestCaseError> {
     let tree = LightTree::build(&lights).unwrap();
     let mut shading = tree.shading(Lambert::new(Vec3::new(0.9, 0.8, 0.7)));
     for (p, n) in street_points() {
-        let exact = shading
-            .shade_exact_occluded(p, n, &mut Occluders::new(walls.clone()))
-            .unwrap();
+        let exact = shading.exact_query(
+            &Query::new(p, n).unwrap(),
+            &mut Occluders::new(walls.clone()),
+        );
         let r = shading
-            .shade_occluded(p, n, Threshold::exact(), &mut Occluders::new(walls.clone()))
+            .shade_query(
+                &Query::new(p, n).unwrap(),
+                Threshold::exact(),
+                &mut Occluders::new(walls.clone()),
+            )
             .unwrap();
         check_exact(&r, exact)?;
         // A host that knows nothing gets the same sum, one point query per
         // light above the horizon at most.
         let mut unsure = Unsure(Occluders::new(walls.clone()));
         let r = shading
-            .shade_occluded(p, n, Threshold::exact(), &mut unsure)
+            .shade_query(&Query::new(p, n).unwrap(), Threshold::exact(), &mut unsure)
             .unwrap();
         check_exact(&r, exact)?;
         prop_assert!(r.point_queries as usize <= lights.len());
@@ -491,13 +524,18 @@ fn visible_fraction_moves_the_estimate_within_the_bound() -> Result<(), TestCase
     let mut shading = tree.shading(Lambert::new(Vec3::ONE));
     let mut moved = 0;
     for (p, n) in street_points() {
-        let exact = shading
-            .shade_exact_occluded(p, n, &mut Occluders::new(walls.clone()))
-            .unwrap();
+        let exact = shading.exact_query(
+            &Query::new(p, n).unwrap(),
+            &mut Occluders::new(walls.clone()),
+        );
         // Coarse thresholds leave partially occluded nodes in the cut.
         for t in [Threshold::relative(0.5), Threshold::absolute(f64::INFINITY)] {
             let base = shading
-                .shade_occluded(p, n, t, &mut Occluders::new(walls.clone()))
+                .shade_query(
+                    &Query::new(p, n).unwrap(),
+                    t,
+                    &mut Occluders::new(walls.clone()),
+                )
                 .unwrap();
             for fraction in [
                 Fraction::Sampled,
@@ -505,7 +543,9 @@ fn visible_fraction_moves_the_estimate_within_the_bound() -> Result<(), TestCase
                 Fraction::Constant(1.0),
             ] {
                 let mut host = Occluders::with_fraction(walls.clone(), fraction);
-                let r = shading.shade_occluded(p, n, t, &mut host).unwrap();
+                let r = shading
+                    .shade_query(&Query::new(p, n).unwrap(), t, &mut host)
+                    .unwrap();
                 check_bound(&r, exact)?;
                 check_threshold(&r, &t)?;
                 if r.radiance != base.radiance {
@@ -581,10 +621,9 @@ proptest! {
         let mut shading = tree.shading(Lambert::new(Vec3::new(0.9, 0.5, 0.2)));
         for (p, n) in points {
             let exact = shading
-                .shade_exact_occluded(p, n, &mut Occluders::new(boxes.clone()))
-                .unwrap();
+                .exact_query(&Query::new(p, n).unwrap(), &mut Occluders::new(boxes.clone()));
             let mut host = Occluders::with_fraction(boxes.clone(), fraction);
-            let r = shading.shade_occluded(p, n, t, &mut host).unwrap();
+            let r = shading.shade_query(&Query::new(p, n).unwrap(), t, &mut host).unwrap();
             check_occluded(&r, exact, &t, &host)?;
         }
     }
@@ -602,10 +641,9 @@ proptest! {
         let mut shading = tree.shading(Phong::new(Vec3::new(0.3, 0.6, 0.9), exponent));
         for (p, n, v) in points {
             let exact = shading
-                .shade_exact_view_occluded(p, n, v, &mut Occluders::new(boxes.clone()))
-                .unwrap();
+                .exact_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), &mut Occluders::new(boxes.clone()));
             let mut host = Occluders::with_fraction(boxes.clone(), fraction);
-            let r = shading.shade_view_occluded(p, n, v, t, &mut host).unwrap();
+            let r = shading.shade_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), t, &mut host).unwrap();
             check_occluded(&r, exact, &t, &host)?;
         }
     }
@@ -620,14 +658,14 @@ proptest! {
         let tree = LightTree::build(&lights).unwrap();
         let mut shading = tree.shading(Lambert::new(Vec3::splat(0.8)));
         let plain = shading.shade(p, n, t).unwrap();
-        let free = shading.shade_occluded(p, n, t, &mut Unoccluded).unwrap();
+        let free = shading.shade_query(&Query::new(p, n).unwrap(), t, &mut Unoccluded).unwrap();
         prop_assert_eq!(plain, free);
         prop_assert_eq!((free.classify_queries, free.point_queries), (0, 0));
 
         // A host with no occluders answers `Visible` at the root, after which
         // the cut is the unoccluded one.
         let mut empty = Occluders::new(Vec::new());
-        let r = shading.shade_occluded(p, n, t, &mut empty).unwrap();
+        let r = shading.shade_query(&Query::new(p, n).unwrap(), t, &mut empty).unwrap();
         prop_assert_eq!(r.radiance, plain.radiance);
         prop_assert_eq!(r.error_bound, plain.error_bound);
         prop_assert_eq!(r.classify_queries + r.point_queries, 1);

@@ -5,17 +5,8 @@ use std::error::Error;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
-use manylights::{ROUNDING_ALLOWANCE, ShadeError, ShadeResult};
+use manylights::{ShadeError, ShadeResult};
 use rayon::prelude::*;
-
-/// The certified-bound contract, per channel:
-/// `|radiance - exact| <= error_bound + ROUNDING_ALLOWANCE * exact`.
-pub fn certifies(r: &ShadeResult, exact: DVec3) -> bool {
-    (r.radiance - exact)
-        .abs()
-        .cmple(r.error_bound + ROUNDING_ALLOWANCE * exact)
-        .all()
-}
 
 /// Runs `f` and returns its value with the wall time it took.
 pub fn timed<T>(f: impl FnOnce() -> T) -> (T, Duration) {
@@ -55,8 +46,7 @@ pub struct ErrorStats {
     /// largest channel of the radiance.
     pub mean_bound_relative: f64,
     /// Pixels (of all shaded ones) breaking the certified-bound contract
-    /// `|tree - exact| <= error_bound + ROUNDING_ALLOWANCE * exact` in some
-    /// channel.
+    /// ([`ShadeResult::certifies`]).
     pub violations: usize,
 }
 
@@ -77,7 +67,7 @@ impl ErrorStats {
             let (Some(r), Some(e)) = (r, e) else {
                 continue;
             };
-            if !certifies(r, *e) {
+            if !r.certifies(*e) {
                 stats.violations += 1;
             }
             let diff = (r.radiance - *e).abs();

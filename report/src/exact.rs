@@ -10,7 +10,7 @@
 //! more than a thousand terms. The Phong power `max(0, r.w)^e` is taken by
 //! repeated squaring with the (integer, shared) exponent's bits, which
 //! vectorizes where `powf` would not. The result agrees with the crate's
-//! `f64` `shade_exact` to about `1e-6` relative (checked by the report).
+//! `f64` `exact_query` to about `1e-6` relative (checked by the report).
 
 use glam::{DVec3, Vec3};
 use manylights::PointLight;

@@ -136,15 +136,15 @@ fn main() -> Result<(), Box<dyn Error>> {
 /// The methods paragraph printed at the top (the crate docs of
 /// `manylights_report` list the same modules).
 const METHODS: &str = "\
-Methods (all single-threaded, same shading points, errors against the crate's f64 shade_exact,
-or shade_exact_occluded in the occluded scene):
+Methods (all single-threaded, same shading points, errors against the crate's f64 exact_query,
+with the host's shadow rays in the occluded scene):
 (a) exact sum written to vectorize: f32 structure-of-arrays in chunks of 8, auto-vectorized,
     f64 flush every 1024 lights; plotted at its measured f32 rounding error (no 0 on a log axis).
     Occluded scene: the exact shadowed sum, one shadow ray per light above the tangent plane
     (unoccluded terms vectorized the same way).
 (b) the crate's cut with the paper's first-order bound (BoundKind::Paper), relative thresholds.
 (c) the crate's cut with its tightest bound (default), relative and absolute thresholds;
-    occluded scene: shade_occluded with the conservative classifier of the `shadows` example.
+    occluded scene: shade_query with the conservative classifier of the `shadows` example.
 (d) the crate's cut with Lightcuts' per-node criterion (Threshold::per_node): refine the node of
     largest error until it is below t x estimate (t = 5%..0.5% around Lightcuts' 2%, plus 0.2% and
     0.1% to reach 1% max error; 2%..0.01% in the occluded scene); certified bound reported

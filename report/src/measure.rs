@@ -7,8 +7,6 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use manylights::ShadeResult;
 
-use crate::compare::certifies;
-
 /// At most this many timed passes over the shading points per
 /// configuration; the fastest is kept.
 pub const MAX_PASSES: usize = 7;
@@ -156,7 +154,7 @@ pub fn measure(
         violations: samples
             .iter()
             .zip(references)
-            .filter(|(s, exact)| s.result.is_some_and(|r| !certifies(&r, **exact)))
+            .filter(|(s, exact)| s.result.is_some_and(|r| !r.certifies(**exact)))
             .count(),
     }
 }

@@ -57,7 +57,7 @@ pub fn run_occluded<'c>(
     });
     if !(m.max_error <= SOA_TOLERANCE) {
         return Err(format!(
-            "{}: the exact shadowed sum differs from shade_exact_occluded by {:.2e} relative",
+            "{}: the exact shadowed sum differs from exact_query with the host by {:.2e} relative",
             scene.name, m.max_error
         )
         .into());

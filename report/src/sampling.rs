@@ -26,7 +26,7 @@
 //! neither sampler knows about occluders when it chooses, as in pbrt-v4.
 
 use glam::{DVec3, Vec3};
-use manylights::{Cone, LightTree, Node, PointLight, Shader, Surface};
+use manylights::{LightTree, Node, PointLight, Shader, Surface};
 use rand::RngExt;
 
 use crate::scenes::SceneRng;
@@ -39,7 +39,7 @@ pub trait LightSampler {
     fn draw<S: Shader>(
         &self,
         shader: &S,
-        frame: &S::Frame,
+        per_point: &S::PerPoint,
         surface: &Surface,
         rng: &mut SceneRng,
     ) -> Option<(Vec3, DVec3)>;
@@ -55,11 +55,11 @@ pub trait LightSampler {
         samples: u32,
         mut visible: impl FnMut(Vec3) -> bool,
     ) -> (DVec3, u32) {
-        let frame = shader.frame(surface);
+        let per_point = shader.prepare(surface);
         let mut sum = DVec3::ZERO;
         let mut rays = 0;
         for _ in 0..samples {
-            if let Some((position, f)) = self.draw(shader, &frame, surface, rng) {
+            if let Some((position, f)) = self.draw(shader, &per_point, surface, rng) {
                 rays += 1;
                 if visible(position) {
                     sum += f;
@@ -74,12 +74,12 @@ pub trait LightSampler {
 #[inline]
 fn contribution<S: Shader>(
     shader: &S,
-    frame: &S::Frame,
+    per_point: &S::PerPoint,
     surface: &Surface,
     light: &PointLight,
 ) -> DVec3 {
     let (position, intensity) = (light.position.as_dvec3(), light.intensity.as_dvec3());
-    shader.eval(frame, surface, position, intensity)
+    shader.eval(per_point, surface, position, intensity)
 }
 
 /// One bin of Vose's alias table.
@@ -151,7 +151,7 @@ impl LightSampler for PowerSampler {
     fn draw<S: Shader>(
         &self,
         shader: &S,
-        frame: &S::Frame,
+        per_point: &S::PerPoint,
         surface: &Surface,
         rng: &mut SceneRng,
     ) -> Option<(Vec3, DVec3)> {
@@ -168,7 +168,7 @@ impl LightSampler for PowerSampler {
             bin.alias as usize
         };
         let light = &self.scaled[j];
-        let f = contribution(shader, frame, surface, light);
+        let f = contribution(shader, per_point, surface, light);
         (f.max_element() > 0.0).then_some((light.position, f))
     }
 }
@@ -187,7 +187,7 @@ fn importance(node: &Node, surface: &Surface) -> f64 {
         // Coincident lights on the shading point contribute 0.
         return 0.0;
     }
-    let cos_max = match Cone::new(surface.point, node) {
+    let cos_max = match node.cone(surface.point) {
         Some(cone) => cone.cos_range(surface.normal).1.max(0.0),
         None => 1.0,
     };
@@ -229,7 +229,7 @@ impl LightSampler for TreeSampler<'_> {
     fn draw<S: Shader>(
         &self,
         shader: &S,
-        frame: &S::Frame,
+        per_point: &S::PerPoint,
         surface: &Surface,
         rng: &mut SceneRng,
     ) -> Option<(Vec3, DVec3)> {
@@ -253,7 +253,7 @@ impl LightSampler for TreeSampler<'_> {
             node = &nodes[children.start + pick];
         }
         // In the leaf, choose in proportion to the actual contribution.
-        let eval = |light: &PointLight| contribution(shader, frame, surface, light);
+        let eval = |light: &PointLight| contribution(shader, per_point, surface, light);
         let leaf = &self.tree.lights()[node.lights()];
         let total: f64 = leaf.iter().map(|l| eval(l).max_element()).sum();
         if total.is_nan() || total <= 0.0 {

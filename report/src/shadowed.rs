@@ -3,7 +3,7 @@
 //!
 //! * [`ShadowLights::exact`] is "standard ray tracing" with shadows: every
 //!   light's contribution, one shadow ray for each light that can contribute
-//!   (above the tangent plane). It equals the crate's `shade_exact_occluded`
+//!   (above the tangent plane). It equals the crate's `exact_query` with the host
 //!   (to `f32` rounding), which the report uses as the reference and which
 //!   casts a ray for every light. Both it and Ward compute the unoccluded
 //!   terms of all lights in a vectorized `f32` loop, as [`crate::exact`]

@@ -3,7 +3,7 @@
 //! shadow rays, both against the buildings.
 
 use glam::Vec3;
-use manylights::{Aabb, Coverage, NodeBounds, Visibility};
+use manylights::{Aabb, Coverage, NodeRegion, Visibility};
 
 use crate::bvh::{Segment, corners, grown, overlaps, union};
 use crate::scenes::City;
@@ -73,7 +73,7 @@ impl Visibility for Shadows<'_> {
     ///   ray is blocked. Only buildings on the segment to the centre of `N`
     ///   can qualify, so only those are tried.
     /// * `Partial` otherwise.
-    fn classify(&mut self, point: Vec3, node: &NodeBounds) -> Coverage {
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
         let apex = point + self.lift;
         let bvh = &self.city.bvh;
         let buildings = &self.city.buildings;

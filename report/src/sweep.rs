@@ -8,8 +8,8 @@ use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use manylights::{
-    BoundKind, Combined, Lambert, LightTree, Phong, Shader, Surface, Threshold, Unoccluded,
-    Visibility,
+    BoundKind, Combined, Lambert, LightTree, Phong, Query, Shader, Threshold, Unoccluded,
+    Visibility, WithView,
 };
 use rayon::prelude::*;
 
@@ -34,14 +34,12 @@ pub struct Bench<'a> {
     pub budget: Duration,
 }
 
-/// Surface of a shading point, as the crate would normalize it.
+/// The query of a shading point, with its view (Lambert ignores it).
 #[inline]
-pub fn surface(pt: &ShadingPoint) -> Surface {
-    Surface {
-        point: pt.point.as_dvec3(),
-        normal: pt.normal.as_dvec3().normalize(),
-        view: pt.view.as_dvec3().normalize(),
-    }
+pub fn query(pt: &ShadingPoint) -> Query<WithView> {
+    Query::new(pt.point, pt.normal)
+        .and_then(|q| q.with_view(pt.view))
+        .expect("scene shading points are valid")
 }
 
 /// The crate's `f64` exact sum at every point through the host `host(pt)`
@@ -61,11 +59,7 @@ where
 {
     let exact: Vec<DVec3> = points
         .par_iter()
-        .map(|pt| {
-            tree.shading(shader)
-                .shade_exact_view_occluded(pt.point, pt.normal, pt.view, &mut host(pt))
-                .expect("scene shading points are valid")
-        })
+        .map(|pt| tree.shading(shader).exact_query(&query(pt), host(pt)))
         .collect();
     points
         .iter()
@@ -111,7 +105,7 @@ pub fn check_soa(
         .fold(0.0, |a: f64, d| if d.is_nan() || d > a { d } else { a });
     if worst.is_nan() || worst > SOA_TOLERANCE {
         return Err(format!(
-            "{}: the vectorized exact sum differs from shade_exact by {worst:.2e} relative",
+            "{}: the vectorized exact sum differs from the exact query by {worst:.2e} relative",
             scene.name
         )
         .into());
@@ -148,13 +142,12 @@ pub fn measure_cut<S: Shader, V: Visibility>(
     let mut shading = tree.shading(shader);
     measure(bench.refs, bench.budget, |i| {
         let pt = &bench.points[i];
+        let q = query(pt);
         let r = match host {
-            Some(host) => {
-                shading.shade_view_occluded(pt.point, pt.normal, pt.view, threshold, &mut host(pt))
-            }
-            None => shading.shade_view(pt.point, pt.normal, pt.view, threshold),
+            Some(host) => shading.shade_query(&q, threshold, host(pt)),
+            None => shading.shade_query(&q, threshold, Unoccluded),
         };
-        Sample::cut(r.expect("scene shading points are valid"), host.is_some())
+        Sample::cut(r.expect("scene thresholds are valid"), host.is_some())
     })
 }
 
@@ -191,14 +184,15 @@ fn sample_sweep<L: LightSampler, S: Shader, V: Visibility>(
             let m = measure(bench.refs, bench.budget, |i| {
                 let pt = &bench.points[i];
                 let mut rng = scenes::rng(SEED ^ ((i as u64) << 20));
-                let s = surface(pt);
+                let q = query(pt);
+                let s = q.surface();
                 let (radiance, rays) = match host {
                     Some(host) => {
                         let mut host = host(pt);
                         let visible = |light| host.visible(pt.point, light);
-                        sampler.estimate(shader, &s, &mut rng, n, visible)
+                        sampler.estimate(shader, s, &mut rng, n, visible)
                     }
-                    None => sampler.estimate(shader, &s, &mut rng, n, |_| true),
+                    None => sampler.estimate(shader, s, &mut rng, n, |_| true),
                 };
                 Sample::estimate(radiance, n, host.map(|_| rays))
             });
@@ -300,7 +294,7 @@ fn sweep<S: Shader + Copy + Send + Sync>(
     let soa_error = check_soa(&soa, scene, &points, &refs)?;
     println!(
         "  {} points ({dropped} dropped: no light above their tangent plane), median exact \
-         radiance {median_radiance:.3e}; vectorized exact sum within {soa_error:.1e} of shade_exact",
+         radiance {median_radiance:.3e}; vectorized exact sum within {soa_error:.1e} of exact_query",
         points.len()
     );
 
@@ -316,8 +310,8 @@ fn sweep<S: Shader + Copy + Send + Sync>(
         "-".into(),
         measure_soa(&soa, scene, bench),
     );
-    // `shade_view` serves Lambert and Lambert + Phong alike (Lambert ignores
-    // the view; it costs one normalization).
+    // A query with a view serves Lambert and Lambert + Phong alike (Lambert
+    // ignores the view).
     let unoccluded = None::<&dyn Fn(&ShadingPoint) -> Unoccluded>;
     let cut = |kind, threshold| measure_cut(&tree, make(kind), bench, threshold, unoccluded);
     for t in PAPER_RELATIVE {

@@ -1,27 +1,12 @@
-//! The light hierarchy: flat storage of virtual-light nodes.
+//! The light hierarchy's layout: flat storage of virtual-light nodes.
 
+use core::fmt;
 use core::ops::Range;
 
 use glam::{DVec3, Vec3};
 
-use crate::build::TreeBuilder;
-use crate::{BuildError, PointLight};
-
-/// An axis-aligned box, `min <= max` per axis.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Aabb {
-    /// Smallest corner.
-    pub min: Vec3,
-    /// Largest corner.
-    pub max: Vec3,
-}
-
-impl Aabb {
-    /// Whether `p` lies in the closed box.
-    pub fn contains(&self, p: Vec3) -> bool {
-        p.cmpge(self.min).all() && p.cmple(self.max).all()
-    }
-}
+use crate::PointLight;
+use crate::geometry::{Aabb, Cone};
 
 /// One node of a [`LightTree`]: a *virtual light* standing for every light
 /// below it, with the data the bounds need.
@@ -48,6 +33,9 @@ impl Aabb {
 ///
 /// Its lights occupy a contiguous range of the tree's leaf order; its children,
 /// if any, a contiguous range of the node array.
+///
+/// Every statistic is taken over the members as stored in the tree, so a
+/// [`refit`](LightTree::refit) recomputes them all.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Node {
     pub(crate) intensity: DVec3,
@@ -57,7 +45,7 @@ pub struct Node {
     pub(crate) channel_offsets: [Vec3; 3],
     /// xx, yy, zz, xy, xz, yz
     pub(crate) covariance: [f32; 6],
-    pub(crate) bbox: Aabb,
+    pub(crate) aabb: Aabb,
     pub(crate) first_light: u32,
     pub(crate) light_count: u32,
     pub(crate) first_child: u32,
@@ -107,7 +95,15 @@ impl Node {
     /// Tight axis-aligned box of the member lights.
     #[inline]
     pub fn aabb(&self) -> Aabb {
-        self.bbox
+        self.aabb
+    }
+    /// The cone under which the node's ball is seen from `point`, or `None`
+    /// when the ball reaches the point (see [`Cone::new`]): such a node has
+    /// no finite bound and is always refined.
+    #[inline]
+    #[must_use]
+    pub fn cone(&self, point: DVec3) -> Option<Cone> {
+        Cone::new(point, self.centroid, self.radius)
     }
     /// Whether the node has no children (its lights are evaluated directly).
     #[inline]
@@ -142,7 +138,7 @@ impl Node {
 /// a node contiguous, root first), lights reordered into leaf order in
 /// another, with [`original_index`](Self::original_index) mapping back to the
 /// caller's order.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct LightTree {
     pub(crate) nodes: Vec<Node>,
     pub(crate) lights: Vec<PointLight>,
@@ -151,23 +147,6 @@ pub struct LightTree {
 }
 
 impl LightTree {
-    /// Builds a tree with the default options of [`TreeBuilder`].
-    ///
-    /// An empty slice gives an empty tree, which shades to zero with zero
-    /// error.
-    ///
-    /// # Errors
-    /// A [`BuildError`] naming the first light with a non-finite or
-    /// out-of-range position, or a non-finite or negative intensity channel.
-    pub fn build(lights: &[PointLight]) -> Result<Self, BuildError> {
-        TreeBuilder::new().build(lights)
-    }
-
-    /// A builder carrying the options (maximum lights per leaf, maximum depth).
-    pub fn builder() -> TreeBuilder {
-        TreeBuilder::new()
-    }
-
     /// The nodes, root first; empty for an empty tree.
     #[inline]
     pub fn nodes(&self) -> &[Node] {
@@ -178,12 +157,6 @@ impl LightTree {
     #[inline]
     pub fn root(&self) -> Option<&Node> {
         self.nodes.first()
-    }
-
-    /// Tight axis-aligned box of node `index`'s lights.
-    #[inline]
-    pub fn node_box(&self, index: usize) -> Aabb {
-        self.nodes[index].bbox
     }
 
     /// The lights in leaf order (the order node light ranges refer to).
@@ -221,5 +194,18 @@ impl LightTree {
         self.nodes.capacity() * size_of::<Node>()
             + self.lights.capacity() * size_of::<PointLight>()
             + self.order.capacity() * size_of::<u32>()
+    }
+}
+
+/// A summary: a tree of a million lights would print hundreds of megabytes
+/// if every node were listed.
+impl fmt::Debug for LightTree {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("LightTree")
+            .field("lights", &self.lights.len())
+            .field("nodes", &self.nodes.len())
+            .field("depth", &self.depth)
+            .field("memory_bytes", &self.memory_bytes())
+            .finish_non_exhaustive()
     }
 }

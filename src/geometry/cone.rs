@@ -1,45 +1,14 @@
-//! The shading point and the cone a node subtends from it.
+//! The cone under which a ball is seen from the shading point.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
-use crate::tree::Node;
-
-/// Absolute widening applied to every cosine bound computed by
-/// [`Cone::cos_range`].
-///
-/// The cosine and sine of the angle to the cone's axis come from a dot and a
-/// cross product of unit `f64` vectors, each within a few `f64::EPSILON` of
-/// the exact value; the sum-of-angles formula adds two products. `16 *
-/// f64::EPSILON` (about `3.6e-15`) covers the accumulated absolute error, so
-/// the returned range contains every true cosine even when it is near 0,
-/// where a relative allowance would not help.
-pub const COS_SLACK: f64 = 16.0 * f64::EPSILON;
-
-/// Relative margin below which a node's ball is treated as containing the
-/// shading point: when `D - R <= D * MIN_CLEARANCE` (D the distance to the
-/// node's centre, R its radius), no finite bound is attempted and the node
-/// is always refined. Bounds grow like `(D / (D - R))^2` or faster, so such a
-/// node's bound would exceed `2^40` times its estimate anyway.
-pub const MIN_CLEARANCE: f64 = 1.0 / (1u64 << 20) as f64;
-
-/// The shading point, in `f64`, as the shaders see it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Surface {
-    /// Shading point `p`.
-    pub point: DVec3,
-    /// Unit surface normal `n` (normalized by the crate from the caller's).
-    pub normal: DVec3,
-    /// Unit direction from `p` towards the eye, or zero when the caller gave
-    /// none (only [`ViewIndependent`](crate::ViewIndependent) shaders are
-    /// shaded without a view).
-    pub view: DVec3,
-}
+use crate::numeric::COS_SLACK;
 
 /// The cone of directions, and the range of distances, under which a node's
 /// ball (centre `c`, radius `R`) is seen from the shading point `p`.
 ///
 /// Exists only when the ball clears the point: `D = |c - p| > R` with margin
-/// [`MIN_CLEARANCE`]. Then every member at `x` satisfies
+/// [`Cone::MIN_CLEARANCE`]. Then every member at `x` satisfies
 /// `D - R <= |x - p| <= D + R`, and its direction `(x - p)/|x - p|` makes an
 /// angle of at most `delta` with the axis `(c - p)/D`, `sin(delta) = R/D`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,16 +30,25 @@ pub struct Cone {
 }
 
 impl Cone {
-    /// The cone of `node` seen from `point`, or `None` when the node's ball
-    /// comes within [`MIN_CLEARANCE`] (relative) of the point, including
-    /// `point` at the centroid.
+    /// Relative margin below which a ball is treated as containing the
+    /// point: when `D - R <= D * MIN_CLEARANCE` (D the distance to the
+    /// ball's centre, R its radius), [`Cone::new`] gives `None` and the cut
+    /// refines the node instead of bounding it. Bounds grow like
+    /// `(D / (D - R))^2` or faster, so such a node's bound would exceed
+    /// `2^40` times its estimate anyway.
+    pub const MIN_CLEARANCE: f64 = 1.0 / (1u64 << 20) as f64;
+
+    /// The cone of the ball of `radius` about `centre` seen from `point`, or
+    /// `None` when the ball comes within [`MIN_CLEARANCE`](Self::MIN_CLEARANCE)
+    /// (relative) of the point, including `point` at the centre.
     #[inline]
-    pub fn new(point: DVec3, node: &Node) -> Option<Self> {
-        let offset = node.centroid.as_dvec3() - point;
+    #[must_use]
+    pub fn new(point: DVec3, centre: Vec3, radius: f32) -> Option<Self> {
+        let offset = centre.as_dvec3() - point;
         let distance = offset.length();
-        let radius = f64::from(node.radius);
+        let radius = f64::from(radius);
         // Also false for distance == 0.
-        if !(distance - radius > distance * MIN_CLEARANCE) {
+        if !(distance - radius > distance * Self::MIN_CLEARANCE) {
             return None;
         }
         let inv_distance = 1.0 / distance;
@@ -105,6 +83,7 @@ impl Cone {
     /// formula for `cos_min` is at most 0, which is all the shaders use. Both
     /// ends are widened by [`COS_SLACK`] and clamped to `[-1, 1]`.
     #[inline]
+    #[must_use]
     pub fn cos_range(&self, dir: DVec3) -> (f64, f64) {
         let cos_c = dir.dot(self.axis);
         let sin_c = dir.cross(self.axis).length();
@@ -114,6 +93,7 @@ impl Cone {
     /// [`cos_range`](Self::cos_range) from the cosine and sine of the angle
     /// between the direction and the axis, for callers that need them too.
     #[inline]
+    #[must_use]
     pub fn cos_range_from(&self, cos_c: f64, sin_c: f64) -> (f64, f64) {
         let (sd, cd) = (self.sin_half_angle, self.cos_half_angle);
         let hi = if cos_c >= cd {

@@ -1,33 +1,56 @@
-//! Building the tree: an adaptive octree over point lights.
+//! Building the tree: an adaptive octree over point lights, and the node
+//! statistics that building and refitting share.
 
 use glam::{DVec3, Vec3};
 
-use crate::tree::{Aabb, LightTree, Node};
-use crate::{BuildError, MAX_COORDINATE, PointLight};
+use super::layout::{LightTree, Node};
+use super::morton;
+use crate::geometry::Aabb;
+use crate::numeric::{BUILD_LENGTH_SLACK, round_up_f32};
+use crate::{BuildError, PointLight};
 
-/// Relative inflation applied to distances computed in `f64` at build time
-/// before they are rounded upward to `f32`: an `f64` length of a difference
-/// carries at most a few ulps (`2^-52` each) of error, so `8 * f64::EPSILON`
-/// covers it with margin.
-const BUILD_LENGTH_SLACK: f64 = 8.0 * f64::EPSILON;
+impl LightTree {
+    /// Builds a tree with the default options of [`TreeBuilder`].
+    ///
+    /// An empty slice gives an empty tree, which shades to zero with zero
+    /// error.
+    ///
+    /// # Errors
+    /// A [`BuildError`] naming the first light with a non-finite or
+    /// out-of-range position, or a non-finite or negative intensity channel.
+    pub fn build(lights: &[PointLight]) -> Result<Self, BuildError> {
+        TreeBuilder::new().build(lights)
+    }
+
+    /// A builder carrying the options (maximum lights per leaf, maximum depth).
+    pub fn builder() -> TreeBuilder {
+        TreeBuilder::new()
+    }
+}
 
 /// Options for building a [`LightTree`].
 ///
-/// The tree is the paper's octree, adapted to its content: each node's cell
-/// is the tight box of its lights, split at the box's centre along every axis
-/// whose extent is at least half the largest extent (so flat or thin light
-/// sets get 2- or 4-way splits instead of empty octants). Empty cells are
-/// dropped, so a node has 2 to 8 children.
+/// The tree is the paper's octree over the scene's bounding cube, adapted to
+/// its content. The lights are sorted once along a Morton (Z-order) curve
+/// with 21 bits per axis (a linear-time radix sort), so every octree cell is
+/// a contiguous run of lights; a node's children are the occupied sub-cells
+/// at the first level where its lights' cells differ, so levels with a
+/// single occupied cell are skipped and a node has 2 to 8 children. Cells
+/// are cubes, so a flat scene (a city) is split along its thin axis only
+/// where cells become as small as its thickness.
 ///
 /// A node becomes a leaf when it holds at most
 /// [`max_leaf_lights`](Self::max_leaf_lights) lights, when it reaches
 /// [`max_depth`](Self::max_depth), or when all its lights are coincident
 /// (zero extent): thousands of coincident lights make one leaf, never an
-/// endless recursion. Nearly coincident lights are always separated by a
-/// split (the `f64` midpoint of two distinct `f32` values lies strictly
-/// between them), so depth is bounded by `max_depth` and by the `f32`
-/// resolution of the coordinates.
+/// endless recursion, and the cut evaluates such a leaf as one light of
+/// their summed intensity. Lights that share a finest Morton cell (cells
+/// are `2^-21` of the scene's extent; exponentially clustered lights, at
+/// `2^-k` say) are halved at the median of their longest axis instead, which
+/// needs at most `log2(n)` more levels, so leaves stay small however deep
+/// the clustering.
 #[derive(Clone, Copy, Debug)]
+#[must_use]
 pub struct TreeBuilder {
     max_leaf_lights: usize,
     max_depth: u32,
@@ -63,7 +86,9 @@ impl TreeBuilder {
 
     /// Builds the tree.
     ///
-    /// Time is `O(n * depth)`, memory `O(n)`.
+    /// The sort is linear; node statistics are computed from each node's
+    /// contiguous run of lights, `O(n * depth)` in sequential memory
+    /// accesses. Memory `O(n)`.
     ///
     /// # Errors
     /// [`BuildError`] for a light with a non-finite or out-of-range
@@ -83,7 +108,6 @@ impl TreeBuilder {
         check_lights(lights)?;
 
         let n = lights.len();
-        let mut order: Vec<u32> = (0..n as u32).collect();
         let mut tree = LightTree {
             nodes: Vec::new(),
             lights: Vec::new(),
@@ -93,83 +117,70 @@ impl TreeBuilder {
         if n == 0 {
             return Ok(tree);
         }
+        // Sort once along the Morton curve and gather the lights into that
+        // order: every octree cell is then a contiguous run, and every later
+        // pass over a node's lights reads memory in sequence.
+        let scene = lights
+            .iter()
+            .fold(Aabb::EMPTY, |b, l| b.union_point(l.position));
+        let codes = morton::codes(lights, scene);
+        let order = morton::sort(&codes);
+        let mut codes: Vec<u64> = order.iter().map(|&k| codes[k as usize]).collect();
+        tree.lights = order.iter().map(|&k| lights[k as usize]).collect();
+        tree.order = order;
+        let identity: Vec<u32> = (0..n as u32).collect();
+
         // Breadth-first: children of a node are appended together, so they
         // are contiguous. `depths[i]` is node i's depth.
         let mut depths: Vec<u32> = vec![0];
-        let mut scratch: Vec<u32> = Vec::with_capacity(n);
-        tree.nodes.push(node_stats(lights, &order, 0..n));
+        tree.nodes.push(node_stats(&tree.lights, &identity, 0..n));
         let mut i = 0;
         while i < tree.nodes.len() {
             let node = tree.nodes[i];
-            let bbox = node.bbox;
             let depth = depths[i];
             tree.depth = tree.depth.max(depth);
             if node.light_count as usize > self.max_leaf_lights && depth < self.max_depth {
                 let range = node.lights();
-                let groups = split(lights, &mut order[range.clone()], &mut scratch, bbox);
+                // The octree cell's occupied sub-cells at the first level
+                // where the codes differ; lights in one finest cell are
+                // halved at their median instead.
+                let groups = match morton::children(&codes[range.clone()]) {
+                    Some(groups) => groups,
+                    None => median_split(
+                        &mut tree.lights[range.clone()],
+                        &mut tree.order[range.clone()],
+                        node.aabb,
+                    ),
+                };
                 if groups.len() > 1 {
                     tree.nodes[i].first_child = tree.nodes.len() as u32;
                     tree.nodes[i].child_count = groups.len() as u32;
                     for g in groups {
                         let r = range.start + g.start..range.start + g.end;
-                        tree.nodes.push(node_stats(lights, &order, r));
+                        tree.nodes.push(node_stats(&tree.lights, &identity, r));
                         depths.push(depth + 1);
                     }
                 }
             }
             i += 1;
         }
-        tree.lights = order.iter().map(|&k| lights[k as usize]).collect();
-        tree.order = order;
+        // Median splits reorder lights within a run of equal codes only, so
+        // the codes stay valid; they are not needed any more.
+        codes.clear();
         tree.nodes.shrink_to_fit();
         Ok(tree)
     }
 }
 
-impl LightTree {
-    /// Moves and re-weights the lights without rebuilding the hierarchy (for
-    /// animated lights): every node's statistics are recomputed from the new
-    /// values, the grouping is kept.
-    ///
-    /// `lights` is in the caller's original order and must have the length
-    /// the tree was built with. Bounds stay certified after a refit (they are
-    /// recomputed, not extrapolated); only their tightness depends on the
-    /// lights having stayed near their groups. Time `O(n * depth)`.
-    ///
-    /// # Errors
-    /// The same [`BuildError`]s as building, checked before anything changes;
-    /// [`BuildError::InvalidOption`] when the length differs.
-    pub fn refit(&mut self, lights: &[PointLight]) -> Result<(), BuildError> {
-        if lights.len() != self.lights.len() {
-            return Err(BuildError::InvalidOption(
-                "refit needs as many lights as the tree was built with",
-            ));
-        }
-        check_lights(lights)?;
-        for (slot, &k) in self.lights.iter_mut().zip(&self.order) {
-            *slot = lights[k as usize];
-        }
-        let identity: Vec<u32> = (0..self.lights.len() as u32).collect();
-        for i in 0..self.nodes.len() {
-            let old = self.nodes[i];
-            let mut fresh = node_stats(&self.lights, &identity, old.lights());
-            fresh.first_child = old.first_child;
-            fresh.child_count = old.child_count;
-            self.nodes[i] = fresh;
-        }
-        Ok(())
-    }
-}
-
-fn check_lights(lights: &[PointLight]) -> Result<(), BuildError> {
+pub(super) fn check_lights(lights: &[PointLight]) -> Result<(), BuildError> {
     for (index, l) in lights.iter().enumerate() {
         if !l.position.is_finite() {
             return Err(BuildError::NonFinitePosition { index });
         }
-        if l.position.abs().max_element() > MAX_COORDINATE {
+        if l.position.abs().max_element() > PointLight::MAX_COORDINATE {
             return Err(BuildError::PositionOutOfRange {
                 index,
-                max: MAX_COORDINATE,
+                max: PointLight::MAX_COORDINATE,
             });
         }
         if !l.intensity.is_finite() {
@@ -183,84 +194,51 @@ fn check_lights(lights: &[PointLight]) -> Result<(), BuildError> {
     Ok(())
 }
 
-/// Partitions `idx` (indices into `lights`) into the non-empty cells of the
-/// box split and returns the cells' sub-ranges, in cell order. A single range
-/// means the split separated nothing (zero extent).
-fn split(
-    lights: &[PointLight],
-    idx: &mut [u32],
-    scratch: &mut Vec<u32>,
-    bbox: Aabb,
+/// Halves a run of lights (and their original indices, kept in step) at
+/// the median position along the box's longest axis: two ranges, or one
+/// when all lights coincide. Used for lights that share a finest Morton
+/// cell (exponentially clustered lights, at `2^-k` say): halving the count
+/// bounds the extra depth by `log2(n)`.
+fn median_split(
+    lights: &mut [PointLight],
+    order: &mut [u32],
+    aabb: Aabb,
 ) -> smallvec::SmallVec<[core::ops::Range<usize>; 8]> {
-    let min = bbox.min.as_dvec3();
-    let max = bbox.max.as_dvec3();
-    let extent = max - min;
-    let largest = extent.max_element();
+    let extent = aabb.max - aabb.min;
     let mut out = smallvec::SmallVec::new();
-    if largest <= 0.0 {
+    if extent.max_element() <= 0.0 {
         // All lights coincide: nothing can separate them.
-        out.push(0..idx.len());
+        out.push(0..lights.len());
         return out;
     }
-    let mid = (min + max) * 0.5;
-    let active = [
-        extent.x >= 0.5 * largest,
-        extent.y >= 0.5 * largest,
-        extent.z >= 0.5 * largest,
-    ];
-    let cell = |p: Vec3| -> usize {
-        let p = p.as_dvec3();
-        let mut c = 0;
-        for axis in 0..3 {
-            if active[axis] && p[axis] > mid[axis] {
-                c |= 1 << axis;
-            }
-        }
-        c
-    };
-    let mut counts = [0usize; 8];
-    for &k in idx.iter() {
-        counts[cell(lights[k as usize].position)] += 1;
+    let axis = extent.max_position();
+    let mut pairs: Vec<(PointLight, u32)> =
+        lights.iter().copied().zip(order.iter().copied()).collect();
+    let mid = pairs.len() / 2;
+    pairs.select_nth_unstable_by(mid, |a, b| {
+        a.0.position[axis].total_cmp(&b.0.position[axis])
+    });
+    for ((l, o), (pl, po)) in lights.iter_mut().zip(order.iter_mut()).zip(pairs) {
+        (*l, *o) = (pl, po);
     }
-    let mut starts = [0usize; 8];
-    let mut acc = 0;
-    for c in 0..8 {
-        starts[c] = acc;
-        acc += counts[c];
-    }
-    scratch.clear();
-    scratch.resize(idx.len(), 0);
-    let mut cursor = starts;
-    for &k in idx.iter() {
-        let c = cell(lights[k as usize].position);
-        scratch[cursor[c]] = k;
-        cursor[c] += 1;
-    }
-    idx.copy_from_slice(scratch);
-    for c in 0..8 {
-        if counts[c] > 0 {
-            out.push(starts[c]..starts[c] + counts[c]);
-        }
-    }
+    out.push(0..mid);
+    out.push(mid..lights.len());
     out
-}
-
-/// Rounds a non-negative `f64` up to the next `f32` at or above it.
-pub(crate) fn round_up_f32(x: f64) -> f32 {
-    let y = x as f32;
-    if f64::from(y) < x { y.next_up() } else { y }
 }
 
 /// Computes a node's statistics over `lights[idx[range]]` (all in `f64`,
 /// then stored as documented on [`Node`]).
-fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>) -> Node {
+pub(super) fn node_stats(
+    lights: &[PointLight],
+    idx: &[u32],
+    range: core::ops::Range<usize>,
+) -> Node {
     let members = &idx[range.clone()];
     let mut intensity = DVec3::ZERO;
     let mut weight = 0.0f64;
     let mut weighted_pos = DVec3::ZERO;
     let mut plain_pos = DVec3::ZERO;
-    let mut bmin = Vec3::splat(f32::INFINITY);
-    let mut bmax = Vec3::splat(f32::NEG_INFINITY);
+    let mut aabb = Aabb::EMPTY;
     for &k in members {
         let l = lights[k as usize];
         let w = f64::from(l.weight());
@@ -269,8 +247,7 @@ fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>
         weight += w;
         weighted_pos += w * x;
         plain_pos += x;
-        bmin = bmin.min(l.position);
-        bmax = bmax.max(l.position);
+        aabb = aabb.union_point(l.position);
     }
     // Zero total weight: every member is dark; use the plain mean so the node
     // still has a sensible position (its contribution is zero either way).
@@ -280,7 +257,7 @@ fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>
         plain_pos / members.len() as f64
     };
     // The average lies in the box in exact arithmetic; clamp away rounding.
-    let centroid = centroid_f64.as_vec3().clamp(bmin, bmax);
+    let centroid = centroid_f64.as_vec3().clamp(aabb.min, aabb.max);
     let c = centroid.as_dvec3();
 
     let mut radius_sq = 0.0f64;
@@ -328,10 +305,7 @@ fn node_stats(lights: &[PointLight], idx: &[u32], range: core::ops::Range<usize>
         radius,
         channel_offsets: [offset(0), offset(1), offset(2)],
         covariance,
-        bbox: Aabb {
-            min: bmin,
-            max: bmax,
-        },
+        aabb,
         first_light: range.start as u32,
         light_count: members.len() as u32,
         first_child: 0,

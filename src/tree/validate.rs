@@ -2,14 +2,9 @@
 
 use glam::DVec3;
 
+use super::layout::LightTree;
 use crate::ValidationError;
-use crate::tree::LightTree;
-
-/// Relative tolerance when comparing a node's stored intensity with the sum
-/// of its children's: both are `f64` sums of the same `f32` values in
-/// different orders, which agree to `n * f64::EPSILON` relative for `n`
-/// terms; `1e-9` covers a million lights with margin.
-const SUM_TOLERANCE: f64 = 1e-9;
+use crate::numeric::SUM_TOLERANCE;
 
 impl LightTree {
     /// Checks the tree's invariants and returns the first one broken.
@@ -98,11 +93,11 @@ impl LightTree {
             }
             let c = node.centroid.as_dvec3();
             let r = f64::from(node.radius);
-            let bbox = node.bbox;
+            let aabb = node.aabb;
             let mut second = [0.0f64; 3];
             for (k, l) in members.iter().enumerate() {
                 let d = l.position.as_dvec3() - c;
-                if d.length() > r || !bbox.contains(l.position) {
+                if d.length() > r || !aabb.contains(l.position) {
                     return Err(ValidationError::LightOutsideBounds {
                         node: i,
                         light: range.start + k,

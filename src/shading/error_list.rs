@@ -1,0 +1,173 @@
+//! The paper's error list: the cut's unrefined nodes by decreasing priority,
+//! with their running sums.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use glam::DVec3;
+
+use crate::numeric::CompensatedSum;
+
+/// Why a node is waiting in the error list, in the order classes are
+/// refined: a node that may not stay in the cut comes before any error.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) enum Class {
+    /// An ordinary node, keyed by its error.
+    Error,
+    /// Its upper bound exceeds the maximal-contribution (specular)
+    /// threshold.
+    OverContribution,
+    /// No finite bound: the node's ball reaches the shading point.
+    Unbounded,
+}
+
+/// An unrefined node of the cut.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Entry {
+    pub(crate) class: Class,
+    /// Largest channel of the error bound: the error list's key.
+    pub(crate) key: f64,
+    pub(crate) node: u32,
+    /// The node is known to be fully visible (no visibility query needed
+    /// below it).
+    pub(crate) visible: bool,
+    pub(crate) estimate: DVec3,
+    pub(crate) error: DVec3,
+}
+
+/// What the heap orders: an entry's class and key, and where its record
+/// lies. Kept to 16 bytes so that sifting is cheap.
+#[derive(Clone, Copy, Debug)]
+struct Key {
+    key: f64,
+    slot: u32,
+    class: Class,
+}
+
+impl PartialEq for Key {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+impl Eq for Key {}
+impl PartialOrd for Key {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Key {
+    #[inline]
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.class
+            .cmp(&other.class)
+            .then(self.key.total_cmp(&other.key))
+    }
+}
+
+/// Unrefined nodes by decreasing (class, error), their records in a side
+/// vector, with running sums of their estimates and errors and counts of
+/// the nodes that must be refined whatever the error. Keeps its capacity
+/// across calls.
+#[derive(Debug, Default)]
+pub(crate) struct ErrorList {
+    heap: BinaryHeap<Key>,
+    entries: Vec<Entry>,
+    /// Running sums; they subtract and may drift, so a stop is confirmed
+    /// with [`resum`](Self::resum).
+    estimate: DVec3,
+    error: DVec3,
+    over_contribution: u32,
+    unbounded: u32,
+}
+
+impl ErrorList {
+    pub(crate) fn clear(&mut self) {
+        self.heap.clear();
+        self.entries.clear();
+        self.estimate = DVec3::ZERO;
+        self.error = DVec3::ZERO;
+        self.over_contribution = 0;
+        self.unbounded = 0;
+    }
+
+    #[inline]
+    pub(crate) fn push(&mut self, e: Entry) {
+        match e.class {
+            Class::Unbounded => self.unbounded += 1,
+            Class::OverContribution => self.over_contribution += 1,
+            Class::Error => {}
+        }
+        self.estimate += e.estimate;
+        self.error += e.error;
+        let slot = self.entries.len() as u32;
+        self.heap.push(Key {
+            key: e.key,
+            slot,
+            class: e.class,
+        });
+        self.entries.push(e);
+    }
+
+    /// The entry that would be refined next.
+    #[inline]
+    pub(crate) fn peek(&self) -> Option<&Entry> {
+        self.heap.peek().map(|k| &self.entries[k.slot as usize])
+    }
+
+    #[inline]
+    pub(crate) fn pop(&mut self) -> Option<Entry> {
+        let e = self.entries[self.heap.pop()?.slot as usize];
+        match e.class {
+            Class::Unbounded => self.unbounded -= 1,
+            Class::OverContribution => self.over_contribution -= 1,
+            Class::Error => {}
+        }
+        self.estimate -= e.estimate;
+        self.error -= e.error;
+        Some(e)
+    }
+
+    /// The largest error waiting (0 when empty).
+    #[inline]
+    pub(crate) fn largest(&self) -> f64 {
+        self.peek().map_or(0.0, |e| e.key)
+    }
+
+    /// Whether every waiting node may stay in the cut: none is unbounded or
+    /// over the maximal contribution.
+    #[inline]
+    pub(crate) fn may_stop(&self) -> bool {
+        self.unbounded == 0 && self.over_contribution == 0
+    }
+
+    /// Whether a node with no finite bound is waiting.
+    pub(crate) fn has_unbounded(&self) -> bool {
+        self.unbounded > 0
+    }
+
+    /// Running sums of the waiting estimates and errors.
+    #[inline]
+    pub(crate) fn sums(&self) -> (DVec3, DVec3) {
+        (self.estimate, self.error)
+    }
+
+    /// Recomputes the sums from scratch with compensated summation, replaces
+    /// the running ones with them and returns them.
+    pub(crate) fn resum(&mut self) -> (DVec3, DVec3) {
+        let mut estimate = CompensatedSum::default();
+        let mut error = CompensatedSum::default();
+        for k in &self.heap {
+            let e = &self.entries[k.slot as usize];
+            estimate.add(e.estimate);
+            error.add(e.error);
+        }
+        (self.estimate, self.error) = (estimate.value(), error.value());
+        (self.estimate, self.error)
+    }
+
+    /// Removes every waiting entry, in no particular order.
+    pub(crate) fn drain(&mut self) -> impl Iterator<Item = Entry> + '_ {
+        let entries = &self.entries;
+        self.heap.drain().map(|k| entries[k.slot as usize])
+    }
+}

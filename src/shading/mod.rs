@@ -1,0 +1,195 @@
+//! Shading: the session a renderer keeps per thread, its per-point query,
+//! thresholds, the error list, refinement, interpolation across levels and
+//! the exact reference sum.
+
+mod blend;
+mod error_list;
+mod exact;
+mod query;
+mod refine;
+mod result;
+mod threshold;
+
+use core::fmt;
+
+use glam::{DVec3, Vec3};
+
+use crate::ShadeError;
+use crate::shader::{Shader, ViewIndependent};
+use crate::tree::LightTree;
+use crate::visibility::{Unoccluded, Visibility};
+
+use blend::Pending;
+use error_list::ErrorList;
+use refine::{Cut, reported_bound};
+
+pub use query::{Accepts, NoView, Query, WithView};
+pub use result::{ShadeResult, Stop};
+pub use threshold::{Target, Threshold};
+
+/// A shading session: a tree, a shader and reusable scratch space.
+///
+/// Create one per thread with [`LightTree::shading`]; after the first few
+/// calls have grown its scratch, shading allocates nothing.
+///
+/// Two calls do the work, both for one [`Query`] and the host's
+/// [`Visibility`] (pass [`Unoccluded`] when there are no occluders; it
+/// compiles every visibility call away):
+/// [`shade_query`](Self::shade_query) picks a cut and returns a certified
+/// [`ShadeResult`], [`exact_query`](Self::exact_query) sums the model over
+/// every light. For view-independent shaders without occluders,
+/// [`shade`](Self::shade) and [`exact`](Self::exact) take the point and
+/// normal directly.
+pub struct Shading<'t, S: Shader> {
+    tree: &'t LightTree,
+    shader: S,
+    scratch: Scratch,
+}
+
+/// What a session reuses from call to call, kept apart from the borrowed
+/// tree and shader.
+#[derive(Debug, Default)]
+struct Scratch {
+    list: ErrorList,
+    blend: Vec<Pending>,
+}
+
+impl LightTree {
+    /// A shading session for `shader` over this tree.
+    #[must_use]
+    pub fn shading<S: Shader>(&self, shader: S) -> Shading<'_, S> {
+        Shading {
+            tree: self,
+            shader,
+            scratch: Scratch::default(),
+        }
+    }
+}
+
+/// The tree summarised, the shader in full, the scratch left out.
+impl<S: Shader + fmt::Debug> fmt::Debug for Shading<'_, S> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Shading")
+            .field("tree", self.tree)
+            .field("shader", &self.shader)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'t, S: Shader> Shading<'t, S> {
+    /// The tree.
+    #[must_use]
+    pub fn tree(&self) -> &'t LightTree {
+        self.tree
+    }
+
+    /// The shader.
+    #[must_use]
+    pub fn shader(&self) -> &S {
+        &self.shader
+    }
+
+    /// Shades one query: picks a cut through the tree with the paper's error
+    /// list until `threshold` is met (or its budget runs out) and returns
+    /// the radiance, its certified error bound and the work done.
+    ///
+    /// `visibility` is the host's ray tracer ([`Visibility`]); pass
+    /// [`Unoccluded`] for none, or `&mut host` to keep the host.
+    ///
+    /// # Errors
+    /// [`ShadeError::InvalidThreshold`] (NaN or negative threshold),
+    /// [`ShadeError::InvalidBand`] (bad interpolation band). The query was
+    /// validated when it was built.
+    pub fn shade_query<M, V: Visibility>(
+        &mut self,
+        query: &Query<M>,
+        threshold: Threshold,
+        visibility: V,
+    ) -> Result<ShadeResult, ShadeError>
+    where
+        S: Accepts<M>,
+    {
+        threshold.check()?;
+        let mut cut = Cut::new(
+            self.tree,
+            &self.shader,
+            query.surface(),
+            query.point(),
+            &threshold,
+            visibility,
+        );
+        let list = &mut self.scratch.list;
+        let outcome = cut.run(list, &threshold);
+        let (estimate, error) = list.resum();
+        let unbounded = list.has_unbounded();
+        let mut radiance = cut.settled.value() + estimate;
+        let mut bound = reported_bound(error);
+        if let (Some(band), Stop::ThresholdMet) = (threshold.interpolation(), outcome.stop) {
+            let top = list.largest();
+            let after = threshold.excess(radiance, bound, top);
+            let level = blend::level(outcome.last_step, after, top);
+            // The blend refines no node less than the error list did, so the
+            // largest single error cannot grow; only the sum is re-checked.
+            if let Some((r, e)) = blend::blend(&mut cut, list, &mut self.scratch.blend, level, band)
+                && threshold.met(r, e, 0.0)
+            {
+                (radiance, bound) = (r, e);
+            }
+        }
+        Ok(ShadeResult {
+            radiance,
+            error_bound: if unbounded { DVec3::INFINITY } else { bound },
+            nodes_evaluated: cut.nodes,
+            lights_evaluated: cut.lights,
+            classify_queries: cut.classify_queries,
+            point_queries: cut.point_queries,
+            stop: outcome.stop,
+        })
+    }
+
+    /// The exact model (crate docs, "The model") for one query, summed over
+    /// every light in `f64` with compensated summation, with the host's
+    /// point-to-point visibility `V_i` ([`Unoccluded`] for none): the
+    /// reference [`shade_query`](Self::shade_query) is certified against.
+    #[must_use]
+    pub fn exact_query<M, V: Visibility>(&self, query: &Query<M>, visibility: V) -> DVec3
+    where
+        S: Accepts<M>,
+    {
+        exact::exact_sum(
+            &self.shader,
+            query.surface(),
+            query.point(),
+            &self.tree.lights,
+            visibility,
+        )
+    }
+}
+
+impl<S: ViewIndependent> Shading<'_, S> {
+    /// Shades `point` with normal `normal` (any non-zero length; normalized
+    /// here), with no occluders: [`shade_query`](Self::shade_query) in one
+    /// line.
+    ///
+    /// # Errors
+    /// [`ShadeError::NonFinitePoint`], [`ShadeError::InvalidNormal`] (zero or
+    /// non-finite normal), [`ShadeError::InvalidThreshold`] (NaN or
+    /// negative), [`ShadeError::InvalidBand`].
+    pub fn shade(
+        &mut self,
+        point: Vec3,
+        normal: Vec3,
+        threshold: Threshold,
+    ) -> Result<ShadeResult, ShadeError> {
+        self.shade_query(&Query::new(point, normal)?, threshold, Unoccluded)
+    }
+
+    /// The exact model at `point` with no occluders:
+    /// [`exact_query`](Self::exact_query) in one line.
+    ///
+    /// # Errors
+    /// [`ShadeError::NonFinitePoint`], [`ShadeError::InvalidNormal`].
+    pub fn exact(&self, point: Vec3, normal: Vec3) -> Result<DVec3, ShadeError> {
+        Ok(self.exact_query(&Query::new(point, normal)?, Unoccluded))
+    }
+}

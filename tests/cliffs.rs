@@ -1,0 +1,79 @@
+//! Hostile scenes that once made the cut's cost explode, each a test on
+//! evaluation counts (never on times).
+
+use glam::Vec3;
+use manylights::{Lambert, LightTree, PointLight, Threshold};
+
+/// `n` coincident lights at `at`.
+fn stack(n: usize, at: Vec3) -> Vec<PointLight> {
+    vec![PointLight::new(at, Vec3::new(1.0, 0.5, 0.25)); n]
+}
+
+/// Coincident lights are one virtual light: a point on the stack, or beside
+/// it, costs the same whatever the number of lights.
+#[test]
+fn coincident_stack_costs_a_constant() {
+    let at = Vec3::new(1.0, 2.0, 3.0);
+    let mut costs = Vec::new();
+    for n in [10, 1_000, 200_000] {
+        let mut lights = stack(n, at);
+        // A few other lights so that the stack is a leaf below the root.
+        lights.extend((0..8).map(|i| PointLight::new(Vec3::new(i as f32, -5.0, 0.0), Vec3::ONE)));
+        let tree = LightTree::build(&lights).unwrap();
+        tree.validate().unwrap();
+        let mut s = tree.shading(Lambert::new(Vec3::ONE));
+        let mut cost = Vec::new();
+        for (p, normal) in [
+            (at, Vec3::Z),
+            (at - Vec3::Z, Vec3::Z),
+            (at + Vec3::X, -Vec3::X),
+        ] {
+            for t in [Threshold::exact(), Threshold::relative(0.01)] {
+                let r = s.shade(p, normal, t).unwrap();
+                assert!(r.certifies(s.exact(p, normal).unwrap()), "{r:?}");
+                cost.push(r.cost());
+            }
+        }
+        costs.push(cost);
+    }
+    assert!(costs.iter().all(|c| *c == costs[0]), "{costs:?}");
+    assert!(costs[0].iter().all(|&c| c <= 16), "{costs:?}");
+}
+
+/// Lights clustered at `2^-k` for many `k`: spatial splits separate one
+/// cluster per level, which once left a leaf of most of the lights at the
+/// maximum depth. Leaves stay small, and so does the cost of a point.
+#[test]
+fn exponentially_clustered_lights_leave_small_leaves() {
+    let mut lights = Vec::new();
+    for k in 0..120 {
+        let x = 2f32.powi(-k);
+        for j in 0..500 {
+            let jitter = Vec3::new(0.0, (j % 25) as f32, (j / 25) as f32);
+            lights.push(PointLight::new(Vec3::new(x, 0.0, 10.0) + jitter, Vec3::ONE));
+        }
+    }
+    let tree = LightTree::build(&lights).unwrap();
+    tree.validate().unwrap();
+    let largest_leaf = tree
+        .nodes()
+        .iter()
+        .filter(|n| n.children().is_empty() && n.radius() > 0.0)
+        .map(|n| n.light_count())
+        .max()
+        .unwrap();
+    assert!(
+        largest_leaf <= 4,
+        "a leaf holds {largest_leaf} distinct lights"
+    );
+    let mut s = tree.shading(Lambert::new(Vec3::ONE));
+    let p = Vec3::new(0.5, 12.0, -40.0);
+    let r = s.shade(p, Vec3::Z, Threshold::relative(0.01)).unwrap();
+    assert!(r.certifies(s.exact(p, Vec3::Z).unwrap()));
+    assert!(
+        r.cost() < 3_000,
+        "cost {} for {} lights",
+        r.cost(),
+        lights.len()
+    );
+}
