@@ -9,13 +9,13 @@
 //! interpolation.
 //!
 //! ```text
-//! cargo run --release --example seams [-- --band 2 --points 100000 --out DIR]
+//! cargo run --release --example seams
 //! ```
 //!
 //! Output: `out/seams_{exact,discrete,interpolated,discrete_diff,interpolated_diff}.png`.
 
 use std::error::Error;
-use std::path::PathBuf;
+use std::path::Path;
 
 use glam::{DVec3, Vec3};
 use manylights::{Lambert, LightTree, Shading, Threshold};
@@ -26,7 +26,7 @@ use rayon::prelude::*;
 
 const BLOCKS: usize = 40;
 const SEED: u64 = 1998;
-/// Points along the scanline (`--points`). Dense enough that the error's
+/// Points along the scanline. Dense enough that the error's
 /// smooth variation between neighbours (about 3e-5 at 1% and 10,000 points)
 /// falls below the jumps being measured; the jumps of the discrete cut do
 /// not shrink with the spacing, those of a continuous estimate do.
@@ -36,7 +36,7 @@ const SCANLINE: (Vec3, Vec3) = (Vec3::new(110.0, 93.0, 0.0), Vec3::new(700.0, 51
 /// Relative thresholds compared.
 const THRESHOLDS: [f64; 3] = [0.01, 0.05, 0.2];
 /// Interpolation band (see `Threshold::with_interpolation`).
-const BAND_DEFAULT: f64 = 2.0;
+const BAND: f64 = 2.0;
 /// Image side in pixels, its corner on the ground, and the threshold the
 /// images use (coarse, so that seams are visible).
 const IMAGE_SIZE: u32 = 256;
@@ -88,29 +88,7 @@ fn scanline(tree: &LightTree, points: &[Vec3], exact: &[DVec3], t: Threshold) ->
 }
 
 fn main() -> Result<(), Box<dyn Error>> {
-    let (mut out, mut band, mut count) = (PathBuf::from("out"), BAND_DEFAULT, SCANLINE_POINTS);
-    let mut args = std::env::args().skip(1);
-    while let Some(flag) = args.next() {
-        let value = args.next().unwrap_or_default();
-        match flag.as_str() {
-            "--out" => out = PathBuf::from(value),
-            "--points" => {
-                count = value
-                    .parse()
-                    .ok()
-                    .filter(|&n| n >= 2)
-                    .ok_or("--points N >= 2")?
-            }
-            "--band" => {
-                band = value
-                    .parse()
-                    .ok()
-                    .filter(|&b| b > 1.0)
-                    .ok_or("--band B > 1")?
-            }
-            other => return Err(format!("unknown argument {other}").into()),
-        }
-    }
+    let (out, band, count) = (Path::new("out"), BAND, SCANLINE_POINTS);
     let tree = LightTree::build(&lamp_grid(BLOCKS, SEED))?;
     let (a, b) = SCANLINE;
     let points: Vec<Vec3> = (0..count)
@@ -150,24 +128,19 @@ fn main() -> Result<(), Box<dyn Error>> {
     }
 
     // The paper's pair, seen from above over two blocks.
-    let size = IMAGE_SIZE as usize;
+    let side = IMAGE_SIZE as usize;
     let pixel = 2.0 * GRID_BLOCK / IMAGE_SIZE as f32;
-    let pixels: Vec<Vec3> = (0..size * size)
+    let pixels: Vec<Vec3> = (0..side * side)
         .map(|i| {
-            let (x, y) = ((i % size) as f32 + 0.5, (i / size) as f32 + 0.5);
+            let (x, y) = ((i % side) as f32 + 0.5, (i / side) as f32 + 0.5);
             IMAGE_ORIGIN + Vec3::new(x, y, 0.0) * pixel
         })
         .collect();
-    std::fs::create_dir_all(&out)?;
+    std::fs::create_dir_all(out)?;
     let exact_img = shade(&tree, &pixels, None);
     let exp = exposure(&exact_img, EXPOSURE_PERCENTILE);
-    write_radiance(
-        &out.join("seams_exact.png"),
-        IMAGE_SIZE,
-        IMAGE_SIZE,
-        &exact_img,
-        exp,
-    )?;
+    let size = (IMAGE_SIZE, IMAGE_SIZE);
+    write_radiance(&out.join("seams_exact.png"), size, &exact_img, exp)?;
     for (name, th) in [
         ("discrete", Threshold::relative(IMAGE_THRESHOLD)),
         (
@@ -177,17 +150,10 @@ fn main() -> Result<(), Box<dyn Error>> {
     ] {
         let img = shade(&tree, &pixels, Some(th));
         let path = out.join(format!("seams_{name}.png"));
-        write_radiance(&path, IMAGE_SIZE, IMAGE_SIZE, &img, exp)?;
+        write_radiance(&path, size, &img, exp)?;
         // Enhanced contrast: the relative error, DIFF_FULL_SCALE at white.
         let diff = out.join(format!("seams_{name}_diff.png"));
-        write_difference_linear(
-            &diff,
-            IMAGE_SIZE,
-            IMAGE_SIZE,
-            &img,
-            &exact_img,
-            DIFF_FULL_SCALE,
-        )?;
+        write_difference_linear(&diff, size, &img, &exact_img, DIFF_FULL_SCALE)?;
     }
     println!(
         "\nimages ({IMAGE_SIZE}x{IMAGE_SIZE}, threshold {:.0}%, difference: white = {:.0}% \

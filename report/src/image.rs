@@ -55,8 +55,7 @@ fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> std::io::Resul
 /// Writes a tone-mapped radiance image (row-major, `width x height`).
 pub fn write_radiance(
     path: &Path,
-    width: u32,
-    height: u32,
+    (width, height): (u32, u32),
     pixels: &[DVec3],
     exposure: f64,
 ) -> std::io::Result<()> {
@@ -93,13 +92,12 @@ fn write_error(
 /// the largest channel; a weak channel may exceed it and show white.)
 pub fn write_difference(
     path: &Path,
-    width: u32,
-    height: u32,
+    size: (u32, u32),
     tree: &[DVec3],
     exact: &[DVec3],
     threshold: f64,
 ) -> std::io::Result<()> {
-    write_error(path, (width, height), tree, exact, |e| {
+    write_error(path, size, tree, exact, |e| {
         1.0 + (e / threshold).log10() / DIFF_DECADES
     })
 }
@@ -110,13 +108,12 @@ pub fn write_difference(
 /// the error jumps show as edges.
 pub fn write_difference_linear(
     path: &Path,
-    width: u32,
-    height: u32,
+    size: (u32, u32),
     tree: &[DVec3],
     exact: &[DVec3],
     full_scale: f64,
 ) -> std::io::Result<()> {
-    write_error(path, (width, height), tree, exact, |e| e / full_scale)
+    write_error(path, size, tree, exact, |e| e / full_scale)
 }
 
 /// Writes `<out>/<name>_tree.png`, `<name>_exact.png` (both at the exposure
@@ -126,7 +123,7 @@ pub fn write_difference_linear(
 pub fn write_comparison(
     out: &Path,
     name: &str,
-    (width, height): (u32, u32),
+    size: (u32, u32),
     tree: &[DVec3],
     exact: &[DVec3],
     threshold: f64,
@@ -135,9 +132,9 @@ pub fn write_comparison(
     std::fs::create_dir_all(out)?;
     let exposure = exposure(exact, percentile);
     let paths = ["tree", "exact", "diff"].map(|f| out.join(format!("{name}_{f}.png")));
-    write_radiance(&paths[0], width, height, tree, exposure)?;
-    write_radiance(&paths[1], width, height, exact, exposure)?;
-    write_difference(&paths[2], width, height, tree, exact, threshold)?;
+    write_radiance(&paths[0], size, tree, exposure)?;
+    write_radiance(&paths[1], size, exact, exposure)?;
+    write_difference(&paths[2], size, tree, exact, threshold)?;
     for path in &paths {
         println!("wrote {}", path.display());
     }
