@@ -39,11 +39,11 @@ pub fn run_scaling(cfg: &Config) -> Result<Vec<ScalingRow>, Box<dyn Error>> {
         "  thresholds: relative {SCALING_RELATIVE} (tight and paper's bound), absolute \
          {SCALING_ABSOLUTE} radiance units (tight)"
     );
-    let shader = Lambert::new(scenes::city(1, 1, SEED).material.kd);
     let unoccluded = None::<&dyn Fn(&ShadingPoint) -> Unoccluded>;
     let mut rows = Vec::new();
     for &n in cfg.scaling_sizes {
         let scene = scenes::city(n, cfg.scaling_points, SEED);
+        let shader = Lambert::new(scene.material.kd);
         let (tree, build) = build_tree(&scene)?;
         let (points, refs) = references(&tree, shader, &scene.points, |_| Unoccluded);
         let soa = SoaLights::new(&scene.lights);

@@ -106,7 +106,7 @@ const TILTED_FRACTION: f64 = 0.25;
 /// every normal faces up).
 const TILT_DEGREES: (f32, f32) = (15.0, 60.0);
 
-/// `count` shading points uniform on the rectangle `[min, max]` of the
+/// `count` shading points uniform on the closed rectangle `[min, max]` of the
 /// plane `z = 0`, normals up except for [`TILTED_FRACTION`] of them, views
 /// towards `camera`.
 fn floor_points(
@@ -119,8 +119,8 @@ fn floor_points(
     (0..count)
         .map(|_| {
             let point = Vec3::new(
-                rng.random_range(min.x..max.x),
-                rng.random_range(min.y..max.y),
+                rng.random_range(min.x..=max.x),
+                rng.random_range(min.y..=max.y),
                 0.0,
             );
             let normal = if rng.random_bool(TILTED_FRACTION) {
