@@ -16,7 +16,7 @@
 use std::error::Error;
 
 use glam::{DVec3, Vec3};
-use manylights::{LightTree, Query, Threshold, Unoccluded};
+use manylights::{LightTree, Threshold, Unoccluded};
 use manylights_report::camera::Camera;
 use manylights_report::compare::{ErrorStats, print_comparison, print_row, shade_pixels, timed};
 use manylights_report::image::write_comparison;
@@ -44,9 +44,8 @@ fn main() -> Result<(), Box<dyn Error>> {
             &hits,
             || (),
             |_, hit| {
-                let query = Query::new(hit.point, hit.normal)?.with_view(hit.view)?;
                 tree.shading(hit.shader())
-                    .shade_query(&query, threshold, Unoccluded)
+                    .shade_query(&hit.query()?, threshold, Unoccluded)
             },
         )
     });
@@ -56,8 +55,9 @@ fn main() -> Result<(), Box<dyn Error>> {
             &hits,
             || (),
             |_, hit| {
-                let query = Query::new(hit.point, hit.normal)?.with_view(hit.view)?;
-                Ok(tree.shading(hit.shader()).exact_query(&query, Unoccluded))
+                Ok(tree
+                    .shading(hit.shader())
+                    .exact_query(&hit.query()?, Unoccluded))
             },
         )
     });

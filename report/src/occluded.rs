@@ -65,11 +65,7 @@ pub fn run_occluded<'c>(
     record(Method::ExactShadowed, "-".into(), m);
 
     let occluded: Option<&dyn Fn(&ShadingPoint) -> Shadows<'c>> = Some(&host);
-    let bench = Bench {
-        points: &points,
-        refs: &refs,
-        budget,
-    };
+    let bench = Bench::new(&points, &refs, budget);
     let cut = |threshold| measure_cut(&tree, shader, bench, threshold, occluded);
     for t in SHADOW_RELATIVE {
         record(

@@ -58,11 +58,7 @@ pub fn run_scaling(cfg: &Config) -> Result<Vec<ScalingRow>, Box<dyn Error>> {
         );
         let mut records = Vec::new();
         let mut record = recorder("city", n, &mut records);
-        let bench = Bench {
-            points: &points,
-            refs: &refs,
-            budget: cfg.budget,
-        };
+        let bench = Bench::new(&points, &refs, cfg.budget);
         record(
             Method::ExactSoa,
             "-".into(),

@@ -34,6 +34,17 @@ pub struct Bench<'a> {
     pub budget: Duration,
 }
 
+impl<'a> Bench<'a> {
+    /// The points with their exact values, `budget` per configuration.
+    pub fn new(points: &'a [ShadingPoint], refs: &'a [DVec3], budget: Duration) -> Self {
+        Self {
+            points,
+            refs,
+            budget,
+        }
+    }
+}
+
 /// The query of a shading point, with its view (Lambert ignores it).
 #[inline]
 pub fn query(pt: &ShadingPoint) -> Query<WithView> {
@@ -300,11 +311,7 @@ fn sweep<S: Shader + Copy + Send + Sync>(
 
     let mut rows = Vec::new();
     let mut record = recorder(scene.name, scene.lights.len(), &mut rows);
-    let bench = Bench {
-        points: &points,
-        refs: &refs,
-        budget: cfg.budget,
-    };
+    let bench = Bench::new(&points, &refs, cfg.budget);
     record(
         Method::ExactSoa,
         "-".into(),

@@ -5,7 +5,7 @@
 use std::f32::consts::TAU;
 
 use glam::Vec3;
-use manylights::{Combined, Lambert, Phong, PointLight};
+use manylights::{Combined, Lambert, Phong, PointLight, Query, ShadeError, WithView};
 use rand::RngExt;
 
 use super::{Material, Scene, Specular, floor_points, rng};
@@ -216,6 +216,11 @@ pub struct GlossyHit {
 }
 
 impl GlossyHit {
+    /// The hit as a query with its view.
+    pub fn query(&self) -> Result<Query<WithView>, ShadeError> {
+        Query::new(self.point, self.normal)?.with_view(self.view)
+    }
+
     /// The surface's shader: Lambert plus Phong of exponent
     /// [`GLOSSY_SCENE_EXPONENT`].
     pub fn shader(&self) -> Combined<Lambert, Phong> {
