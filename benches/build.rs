@@ -6,7 +6,7 @@
 //! ```
 //!
 //! Throughput is reported in lights per second; the report
-//! (`cargo run --release --example report`) prints build time and memory
+//! (`cargo run --release -p manylights-report`) prints build time and memory
 //! per light as well.
 
 use std::hint::black_box;
@@ -17,11 +17,7 @@ use criterion::{
 };
 use manylights::LightTree;
 
-// Shared with the report, which uses every scene; this bench only needs the
-// city's light layout.
-#[allow(dead_code)]
-#[path = "../examples/report/scenes.rs"]
-mod scenes;
+use manylights_report::scenes;
 
 /// Numbers of lights.
 const SIZES: [usize; 4] = [1_000, 10_000, 100_000, 1_000_000];

@@ -1,7 +1,8 @@
-//! Criterion bench of shading one point: `Shading::shade` (or `shade_view`
-//! for the glossy scene) on each of the report's scenes at two relative
-//! thresholds, and a pair showing that the default `Unoccluded` visibility
-//! costs nothing: `shade` against `shade_occluded(.., &mut Unoccluded)`.
+//! Criterion bench of shading one point: `Shading::shade` (or `shade_query`
+//! with a view for the glossy scene) on each of the report's scenes at two
+//! relative thresholds, and a pair showing that visibility costs nothing
+//! when it is `Unoccluded`: `shade_query(.., Unoccluded)` against
+//! `shade_query(.., &mut Unoccluded)` (a host passed by reference).
 //!
 //! ```text
 //! cargo bench --bench shade
@@ -16,14 +17,9 @@ use std::time::Duration;
 use criterion::{
     BenchmarkGroup, Criterion, criterion_group, criterion_main, measurement::WallTime,
 };
-use manylights::{Combined, Lambert, LightTree, Phong, ShadeResult, Threshold, Unoccluded};
+use manylights::{Combined, Lambert, LightTree, Phong, Query, ShadeResult, Threshold, Unoccluded};
 
-// Shared with the report; this bench uses the scenes, not the samplers.
-#[allow(dead_code)]
-#[path = "../examples/report/scenes.rs"]
-mod scenes;
-
-use scenes::{Scene, ShadingPoint};
+use manylights_report::scenes::{self, Scene, ShadingPoint};
 
 const SEED: u64 = 1998;
 /// Shading points cycled through per scene.
@@ -31,12 +27,13 @@ const POINTS: usize = 64;
 /// Relative thresholds benchmarked on every scene.
 const THRESHOLDS: [f64; 2] = [0.01, 0.001];
 
-/// Benchmarks `shade` over the points of `scene`, one point per iteration.
-fn cycle(
+/// Benchmarks `shade` over `points` (shading points or queries), one point
+/// per iteration.
+fn cycle<P>(
     group: &mut BenchmarkGroup<'_, WallTime>,
     id: String,
-    points: &[ShadingPoint],
-    mut shade: impl FnMut(&ShadingPoint) -> ShadeResult,
+    points: &[P],
+    mut shade: impl FnMut(&P) -> ShadeResult,
 ) {
     group.bench_function(id, |b| {
         let mut i = 0;
@@ -78,10 +75,13 @@ fn shade(c: &mut Criterion) {
                 Some(spec) => {
                     let phong = Phong::new(spec.ks, spec.exponent as f32);
                     let mut shading = tree.shading(Combined::new(lambert, phong));
-                    cycle(&mut group, id, &scene.points, |pt| {
+                    cycle(&mut group, id, &scene.points, |pt: &ShadingPoint| {
+                        let query =
+                            Query::new(pt.point, pt.normal).and_then(|q| q.with_view(pt.view));
+                        let query = query.expect("valid point");
                         shading
-                            .shade_view(pt.point, pt.normal, pt.view, threshold)
-                            .expect("valid point")
+                            .shade_query(&query, threshold, Unoccluded)
+                            .expect("valid threshold")
                     });
                 }
             }
@@ -89,7 +89,8 @@ fn shade(c: &mut Criterion) {
     }
     group.finish();
 
-    // Unoccluded compiles every visibility call away: both should time the same.
+    // Unoccluded compiles every visibility call away, by value or through a
+    // reference: both should time the same.
     let city = &scenes[0];
     let tree = LightTree::build(&city.lights).expect("valid lights");
     let threshold = Threshold::relative(THRESHOLDS[0]);
@@ -99,15 +100,20 @@ fn shade(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(1))
         .sample_size(20);
     let mut shading = tree.shading(Lambert::new(city.material.kd));
-    cycle(&mut group, "shade".into(), &city.points, |pt| {
+    let queries: Vec<Query> = city
+        .points
+        .iter()
+        .map(|pt| Query::new(pt.point, pt.normal).expect("valid point"))
+        .collect();
+    cycle(&mut group, "by value".into(), &queries, |q| {
         shading
-            .shade(pt.point, pt.normal, threshold)
-            .expect("valid point")
+            .shade_query(q, threshold, Unoccluded)
+            .expect("valid threshold")
     });
-    cycle(&mut group, "shade_occluded".into(), &city.points, |pt| {
+    cycle(&mut group, "by reference".into(), &queries, |q| {
         shading
-            .shade_occluded(pt.point, pt.normal, threshold, &mut Unoccluded)
-            .expect("valid point")
+            .shade_query(q, threshold, &mut Unoccluded)
+            .expect("valid threshold")
     });
     group.finish();
 }

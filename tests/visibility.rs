@@ -19,6 +19,7 @@ use manylights::{
     Aabb, Coverage, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeResult, Stop,
     Threshold, Unoccluded, Visibility,
 };
+use manylights_report::bvh::corners;
 use proptest::prelude::*;
 
 /// Safety margin of the classifier, in scene units. `visible` runs its slab
@@ -107,17 +108,6 @@ fn segment_hits(a: DVec3, b: DVec3, lo: DVec3, hi: DVec3) -> bool {
         }
     }
     true
-}
-
-/// The eight corners of a box.
-fn corners(b: &Aabb) -> [Vec3; 8] {
-    std::array::from_fn(|i| {
-        Vec3::new(
-            if i & 1 == 0 { b.min.x } else { b.max.x },
-            if i & 2 == 0 { b.min.y } else { b.max.y },
-            if i & 4 == 0 { b.min.z } else { b.max.z },
-        )
-    })
 }
 
 impl Visibility for Occluders {

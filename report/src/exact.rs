@@ -6,11 +6,11 @@
 //! loop over one chunk has no data-dependent branch (the `d = 0` and
 //! below-the-horizon cases are selects) and no cross-lane dependency, so the
 //! compiler turns it into SIMD code; the lane accumulators are flushed to
-//! `f64` every [`FLUSH_CHUNKS`] chunks so that the `f32` sums never run over
+//! `f64` every `FLUSH_CHUNKS` chunks so that the `f32` sums never run over
 //! more than a thousand terms. The Phong power `max(0, r.w)^e` is taken by
 //! repeated squaring with the (integer, shared) exponent's bits, which
 //! vectorizes where `powf` would not. The result agrees with the crate's
-//! `f64` `shade_exact` to about `1e-6` relative (checked by the report).
+//! `f64` `exact_query` to about `1e-6` relative (checked by the report).
 
 use glam::{DVec3, Vec3};
 use manylights::PointLight;

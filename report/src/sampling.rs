@@ -18,16 +18,69 @@
 //! Both ignore the specular lobe when choosing (pbrt's importance does too);
 //! they stay unbiased for every light with a non-zero probability, which is
 //! every light above the tangent plane (all of them in the report's scenes,
-//! where lights are above the floor and the eye is too).
+//! where lights are above the floor and the eye is too). Random numbers come
+//! from the scenes' generator ([`SceneRng`]).
 //!
 //! In an occluded scene each sample with a non-zero unoccluded contribution
 //! casts one shadow ray (`visible`) and counts only if it is unblocked:
 //! neither sampler knows about occluders when it chooses, as in pbrt-v4.
 
 use glam::{DVec3, Vec3};
-use manylights::{Cone, LightTree, Node, PointLight, Shader, Surface};
+use manylights::{LightTree, Node, PointLight, Shader, Surface};
+use rand::RngExt;
 
-use crate::scenes::Rng;
+use crate::scenes::SceneRng;
+
+/// A Monte Carlo light sampler: draws one light per sample.
+pub trait LightSampler {
+    /// One sample at `surface`: the drawn light's position and its
+    /// contribution divided by the probability of drawing it, or `None`
+    /// when the sample contributes nothing (no shadow ray is needed).
+    fn draw<S: Shader>(
+        &self,
+        shader: &S,
+        per_point: &S::PerPoint,
+        surface: &Surface,
+        rng: &mut SceneRng,
+    ) -> Option<(Vec3, DVec3)>;
+
+    /// Mean of `samples` estimates, each counted where `visible` (the
+    /// shadow ray to the light's position) says the light is unblocked;
+    /// returns the estimate and the number of shadow rays cast.
+    fn estimate<S: Shader>(
+        &self,
+        shader: &S,
+        surface: &Surface,
+        rng: &mut SceneRng,
+        samples: u32,
+        mut visible: impl FnMut(Vec3) -> bool,
+    ) -> (DVec3, u32) {
+        let per_point = shader.prepare(surface);
+        let mut sum = DVec3::ZERO;
+        let mut rays = 0;
+        for _ in 0..samples {
+            if let Some((position, f)) = self.draw(shader, &per_point, surface, rng) {
+                rays += 1;
+                if visible(position) {
+                    sum += f;
+                }
+            }
+        }
+        (sum / f64::from(samples), rays)
+    }
+}
+
+/// The contribution of `light` at `surface`: the shader's exact term.
+#[inline]
+fn contribution<S: Shader>(
+    shader: &S,
+    per_point: &S::PerPoint,
+    surface: &Surface,
+    light: &PointLight,
+) -> DVec3 {
+    let (position, intensity) = (light.position.as_dvec3(), light.intensity.as_dvec3());
+    shader.eval(per_point, surface, position, intensity)
+}
 
 /// One bin of Vose's alias table.
 #[derive(Clone, Copy, Debug)]
@@ -92,49 +145,31 @@ impl PowerSampler {
             .collect();
         Self { bins, scaled }
     }
+}
 
-    /// Mean of `samples` estimates `V_i f(x_i) / p_i`, with `visible` the
-    /// shadow ray to a light position; returns the estimate and the number
-    /// of shadow rays cast.
-    pub fn estimate<S: Shader>(
+impl LightSampler for PowerSampler {
+    fn draw<S: Shader>(
         &self,
         shader: &S,
+        per_point: &S::PerPoint,
         surface: &Surface,
-        rng: &mut Rng,
-        samples: u32,
-        mut visible: impl FnMut(Vec3) -> bool,
-    ) -> (DVec3, u32) {
-        if self.bins.is_empty() {
-            return (DVec3::ZERO, 0);
-        }
-        let frame = shader.frame(surface);
+        rng: &mut SceneRng,
+    ) -> Option<(Vec3, DVec3)> {
         let n = self.bins.len();
-        let mut sum = DVec3::ZERO;
-        let mut rays = 0;
-        for _ in 0..samples {
-            let u = rng.f64() * n as f64;
-            let i = (u as usize).min(n - 1);
-            let bin = self.bins[i];
-            let j = if u - (i as f64) < bin.threshold {
-                i
-            } else {
-                bin.alias as usize
-            };
-            let light = &self.scaled[j];
-            let f = shader.eval(
-                &frame,
-                surface,
-                light.position.as_dvec3(),
-                light.intensity.as_dvec3(),
-            );
-            if f.max_element() > 0.0 {
-                rays += 1;
-                if visible(light.position) {
-                    sum += f;
-                }
-            }
+        if n == 0 {
+            return None;
         }
-        (sum / f64::from(samples), rays)
+        let u = rng.random::<f64>() * n as f64;
+        let i = (u as usize).min(n - 1);
+        let bin = self.bins[i];
+        let j = if u - (i as f64) < bin.threshold {
+            i
+        } else {
+            bin.alias as usize
+        };
+        let light = &self.scaled[j];
+        let f = contribution(shader, per_point, surface, light);
+        (f.max_element() > 0.0).then_some((light.position, f))
     }
 }
 
@@ -152,7 +187,7 @@ fn importance(node: &Node, surface: &Surface) -> f64 {
         // Coincident lights on the shading point contribute 0.
         return 0.0;
     }
-    let cos_max = match Cone::new(surface.point, node) {
+    let cos_max = match node.cone(surface.point) {
         Some(cone) => cone.cos_range(surface.normal).1.max(0.0),
         None => 1.0,
     };
@@ -188,79 +223,55 @@ impl<'t> TreeSampler<'t> {
     pub fn new(tree: &'t LightTree) -> Self {
         Self { tree }
     }
+}
 
-    /// Mean of `samples` single-path estimates, with `visible` the shadow
-    /// ray to a light position; returns the estimate and the number of
-    /// shadow rays cast.
-    pub fn estimate<S: Shader>(
+impl LightSampler for TreeSampler<'_> {
+    fn draw<S: Shader>(
         &self,
         shader: &S,
+        per_point: &S::PerPoint,
         surface: &Surface,
-        rng: &mut Rng,
-        samples: u32,
-        mut visible: impl FnMut(Vec3) -> bool,
-    ) -> (DVec3, u32) {
-        if self.tree.is_empty() {
-            return (DVec3::ZERO, 0);
-        }
-        let frame = shader.frame(surface);
+        rng: &mut SceneRng,
+    ) -> Option<(Vec3, DVec3)> {
         let nodes = self.tree.nodes();
-        let lights = self.tree.lights();
-        let eval = |light: &PointLight| {
-            shader.eval(
-                &frame,
-                surface,
-                light.position.as_dvec3(),
-                light.intensity.as_dvec3(),
-            )
-        };
-        let mut sum = DVec3::ZERO;
-        let mut rays = 0;
-        'samples: for _ in 0..samples {
-            let mut node = &nodes[0];
-            let mut pdf = 1.0;
-            while !node.is_leaf() {
-                let children = node.children();
-                debug_assert!(children.len() <= MAX_CHILDREN);
-                let mut weights = [0.0; MAX_CHILDREN];
-                let mut total = 0.0;
-                for (w, child) in weights.iter_mut().zip(&nodes[children.clone()]) {
-                    *w = importance(child, surface);
-                    total += *w;
-                }
-                if total.is_nan() || total <= 0.0 {
-                    continue 'samples;
-                }
-                let pick = choose(&weights[..children.len()], rng.f64() * total);
-                pdf *= weights[pick] / total;
-                node = &nodes[children.start + pick];
+        let mut node = nodes.first()?;
+        let mut pdf = 1.0;
+        while !node.is_leaf() {
+            let children = node.children();
+            debug_assert!(children.len() <= MAX_CHILDREN);
+            let mut weights = [0.0; MAX_CHILDREN];
+            let mut total = 0.0;
+            for (w, child) in weights.iter_mut().zip(&nodes[children.clone()]) {
+                *w = importance(child, surface);
+                total += *w;
             }
-            // In the leaf, choose in proportion to the actual contribution.
-            let leaf = &lights[node.lights()];
-            let total: f64 = leaf.iter().map(|l| eval(l).max_element()).sum();
             if total.is_nan() || total <= 0.0 {
-                continue;
+                return None;
             }
-            let mut u = rng.f64() * total;
-            let mut chosen = None;
-            for light in leaf {
-                let f = eval(light);
-                let c = f.max_element();
-                if c > 0.0 {
-                    chosen = Some((light.position, f, c));
-                    if u < c {
-                        break;
-                    }
-                    u -= c;
+            let pick = choose(&weights[..children.len()], rng.random::<f64>() * total);
+            pdf *= weights[pick] / total;
+            node = &nodes[children.start + pick];
+        }
+        // In the leaf, choose in proportion to the actual contribution.
+        let eval = |light: &PointLight| contribution(shader, per_point, surface, light);
+        let leaf = &self.tree.lights()[node.lights()];
+        let total: f64 = leaf.iter().map(|l| eval(l).max_element()).sum();
+        if total.is_nan() || total <= 0.0 {
+            return None;
+        }
+        let mut u = rng.random::<f64>() * total;
+        let mut chosen = None;
+        for light in leaf {
+            let f = eval(light);
+            let c = f.max_element();
+            if c > 0.0 {
+                chosen = Some((light.position, f, c));
+                if u < c {
+                    break;
                 }
-            }
-            if let Some((position, f, c)) = chosen {
-                rays += 1;
-                if visible(position) {
-                    sum += f * (total / (c * pdf));
-                }
+                u -= c;
             }
         }
-        (sum / f64::from(samples), rays)
+        chosen.map(|(position, f, c)| (position, f * (total / (c * pdf))))
     }
 }

@@ -1,9 +1,14 @@
-//! SVG plots of the report (log-log), drawn with `plotters`.
+//! SVG plots of the report (log-log), drawn with `plotters`: error against
+//! time per scene, and time against the number of lights.
 
 use std::error::Error;
 use std::path::Path;
 
 use plotters::prelude::*;
+
+use crate::measure::{Measurement, Method, Record};
+use crate::scaling::{ScalingRow, scaling_series_of};
+use crate::scenes::Scene;
 
 /// Plot size in pixels: two panels side by side for error plots.
 const ERROR_PLOT_SIZE: (u32, u32) = (1600, 700);
@@ -154,4 +159,121 @@ fn draw_panel(
         .label_font((FONT, 13))
         .draw()?;
     Ok(())
+}
+
+/// Plot colour of each method.
+fn colour(method: Method) -> RGBColor {
+    match method {
+        Method::ExactSoa | Method::ExactShadowed => RGBColor(0, 0, 0),
+        Method::TreePaper => RGBColor(230, 120, 0),
+        Method::TreeRelative => RGBColor(20, 70, 220),
+        Method::TreeAbsolute => RGBColor(0, 170, 200),
+        Method::PerNode => RGBColor(30, 150, 50),
+        Method::PowerSampling => RGBColor(210, 30, 40),
+        Method::TreeSampling => RGBColor(150, 50, 180),
+        Method::Ward => RGBColor(140, 90, 40),
+    }
+}
+
+/// The error-against-time plot of one scene: max error (left) and mean
+/// error (right), each with the certified bounds dashed.
+pub fn plot_scene(path: &Path, scene: &Scene, rows: &[Record]) -> Result<(), Box<dyn Error>> {
+    let panel_series = |error: fn(&Measurement) -> f64, bound: fn((f64, f64)) -> f64| {
+        let mut series = Vec::new();
+        for method in Method::ALL {
+            let of = || rows.iter().filter(move |r| r.method == method);
+            if of().next().is_none() {
+                continue;
+            }
+            let us = |r: &Record| r.measurement.seconds_per_point * 1e6;
+            series.push(Series {
+                label: method.label().to_string(),
+                colour: colour(method),
+                style: Style::Solid,
+                points: of().map(|r| (us(r), error(&r.measurement))).collect(),
+            });
+            if matches!(
+                method,
+                Method::TreePaper | Method::TreeRelative | Method::PerNode
+            ) {
+                series.push(Series {
+                    label: format!("{}: certified bound", method.label()),
+                    colour: colour(method),
+                    style: Style::Dashed,
+                    points: of()
+                        .filter_map(|r| r.measurement.bound.map(|b| (us(r), bound(b))))
+                        .collect(),
+                });
+            }
+        }
+        series
+    };
+    let max_series = panel_series(|m| m.max_error, |b| b.1);
+    let mean_series = panel_series(|m| m.mean_error, |b| b.0);
+    let x_desc = "time per shading point (us)";
+    let floor = format!("errors < {:.0e} drawn at it", ERROR_FLOOR);
+    let max_desc = format!("max relative error, largest channel ({floor})");
+    let mean_desc = format!("mean relative error, largest channel ({floor})");
+    let shadows = if rows.iter().any(|r| r.measurement.queries.is_some()) {
+        ", with shadows"
+    } else {
+        ""
+    };
+    let max_caption = format!(
+        "{}: max relative error ({} lights{shadows})",
+        scene.name,
+        scene.lights.len()
+    );
+    let mean_caption = format!("{}: mean relative error", scene.name);
+    write_panels(
+        path,
+        &[
+            Panel {
+                caption: &max_caption,
+                x_desc,
+                y_desc: &max_desc,
+                series: &max_series,
+                legend: SeriesLabelPosition::LowerLeft,
+            },
+            Panel {
+                caption: &mean_caption,
+                x_desc,
+                y_desc: &mean_desc,
+                series: &mean_series,
+                legend: SeriesLabelPosition::LowerLeft,
+            },
+        ],
+    )
+}
+
+/// The time-per-point-against-lights plot of the scaling part.
+pub fn plot_scaling(path: &Path, rows: &[ScalingRow]) -> Result<(), Box<dyn Error>> {
+    let mut series: Vec<Series> = Vec::new();
+    for row in rows {
+        for r in &row.records {
+            let Some(label) = scaling_series_of(r) else {
+                continue;
+            };
+            let point = (row.lights as f64, r.measurement.seconds_per_point * 1e6);
+            match series.iter_mut().find(|s| s.label == label) {
+                Some(s) => s.points.push(point),
+                None => series.push(Series {
+                    label,
+                    colour: colour(r.method),
+                    style: Style::Solid,
+                    points: vec![point],
+                }),
+            }
+        }
+    }
+    write_panels(
+        path,
+        &[Panel {
+            caption: "city, fixed lamp density: time per shading point",
+            x_desc: "number of lights",
+            y_desc: "time per shading point (us)",
+            series: &series,
+            legend: SeriesLabelPosition::UpperLeft,
+        }],
+    )
 }

@@ -5,6 +5,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
+use manylights::ShadeResult;
 
 /// At most this many timed passes over the shading points per
 /// configuration; the fastest is kept.
@@ -15,8 +16,9 @@ pub const MAX_PASSES: usize = 7;
 pub struct Sample {
     /// The estimated radiance.
     pub radiance: DVec3,
-    /// The certified error bound, for certified methods.
-    pub bound: Option<DVec3>,
+    /// The tree's whole result, with its certified bound, for the crate's
+    /// cuts.
+    pub result: Option<ShadeResult>,
     /// Work done, in the method's own unit (node bounds plus light
     /// evaluations for cuts, samples for Monte Carlo, lights for the exact
     /// sum).
@@ -24,6 +26,36 @@ pub struct Sample {
     /// Visibility work in an occluded scene: shadow rays (point-to-point
     /// queries) and node classifications.
     pub queries: Option<Queries>,
+}
+
+impl Sample {
+    /// A baseline's estimate: `cost` in its own unit, with the shadow rays
+    /// it cast in an occluded scene.
+    pub fn estimate(radiance: DVec3, cost: u32, shadow_rays: Option<u32>) -> Self {
+        Self {
+            radiance,
+            result: None,
+            cost,
+            queries: shadow_rays.map(|shadow_rays| Queries {
+                shadow_rays,
+                classify: 0,
+            }),
+        }
+    }
+
+    /// A cut of the crate's tree; `occluded` when the host's visibility
+    /// queries count.
+    pub fn cut(r: ShadeResult, occluded: bool) -> Self {
+        Self {
+            radiance: r.radiance,
+            result: Some(r),
+            cost: r.cost(),
+            queries: occluded.then_some(Queries {
+                shadow_rays: r.point_queries,
+                classify: r.classify_queries,
+            }),
+        }
+    }
 }
 
 /// Visibility queries of one shading point.
@@ -52,6 +84,9 @@ pub struct Measurement {
     /// Mean shadow rays and mean classifications per point, in occluded
     /// scenes.
     pub queries: Option<(f64, f64)>,
+    /// Points where the crate's result breaks its certified bound (there
+    /// should be none).
+    pub violations: usize,
 }
 
 /// Relative error in the largest channel: `max_k |estimate_k - exact_k| /
@@ -94,7 +129,7 @@ pub fn measure(
     let bounds: Option<Vec<f64>> = samples
         .iter()
         .zip(references)
-        .map(|(s, &exact)| s.bound.map(|b| relative(b, exact)))
+        .map(|(s, &exact)| s.result.map(|r| relative(r.error_bound, exact)))
         .collect();
     Measurement {
         seconds_per_point: fastest.as_secs_f64() / n,
@@ -116,6 +151,11 @@ pub fn measure(
                     |f: fn(&Queries) -> u32| q.iter().map(|x| f64::from(f(x))).sum::<f64>() / n;
                 (mean(|x| x.shadow_rays), mean(|x| x.classify))
             }),
+        violations: samples
+            .iter()
+            .zip(references)
+            .filter(|(s, exact)| s.result.is_some_and(|r| !r.certifies(**exact)))
+            .count(),
     }
 }
 
@@ -215,39 +255,4 @@ pub struct Record {
     pub parameter: String,
     /// Time and accuracy.
     pub measurement: Measurement,
-}
-
-/// Header of `errors.csv` and `scaling.csv`.
-pub const CSV_HEADER: &str = "scene,lights,method,parameter,time_per_point_us,\
-mean_rel_error,max_rel_error,mean_rel_bound,max_rel_bound,mean_cost,\
-mean_shadow_rays,mean_classify_queries";
-
-impl Record {
-    /// The record as a CSV line (without newline).
-    pub fn csv(&self) -> String {
-        let m = &self.measurement;
-        let (mean_bound, max_bound) = match m.bound {
-            Some((mean, max)) => (format!("{mean:.6e}"), format!("{max:.6e}")),
-            None => (String::new(), String::new()),
-        };
-        let (rays, classify) = match m.queries {
-            Some((rays, classify)) => (format!("{rays:.1}"), format!("{classify:.1}")),
-            None => (String::new(), String::new()),
-        };
-        format!(
-            "{},{},{},{},{:.4},{:.6e},{:.6e},{},{},{:.1},{},{}",
-            self.scene,
-            self.lights,
-            self.method.id(),
-            self.parameter,
-            m.seconds_per_point * 1e6,
-            m.mean_error,
-            m.max_error,
-            mean_bound,
-            max_bound,
-            m.mean_cost,
-            rays,
-            classify
-        )
-    }
 }

@@ -1,19 +1,12 @@
-//! The occluded scene of the report, `city-shadows`, and the two baselines
-//! that only make sense with occluders: the exact shadowed sum and Ward's
-//! adaptive shadow testing.
+//! The two baselines that only make sense with occluders: the exact
+//! shadowed sum and Ward's adaptive shadow testing.
 //!
-//! * The scene is the night city of `city --shadows`
-//!   (`examples/common/city.rs`: street lamps, lit windows, box buildings,
-//!   a BVH over them), with shading points on the streets and on the
-//!   façades instead of a camera's pixels.
-//! * The host is that example's `Shadows` (in `common/city.rs`): the same
-//!   conservative Warnock-style classifier and the same shadow rays.
 //! * [`ShadowLights::exact`] is "standard ray tracing" with shadows: every
 //!   light's contribution, one shadow ray for each light that can contribute
-//!   (above the tangent plane). It equals the crate's `shade_exact_occluded`
+//!   (above the tangent plane). It equals the crate's `exact_query` with the host
 //!   (to `f32` rounding), which the report uses as the reference and which
 //!   casts a ray for every light. Both it and Ward compute the unoccluded
-//!   terms of all lights in a vectorized `f32` loop, as `report/exact.rs`
+//!   terms of all lights in a vectorized `f32` loop, as [`crate::exact`]
 //!   does, so that the baselines pay for their shadow rays and not for a
 //!   slow loop.
 //! * [`Ward`] is Ward's adaptive shadow testing (Ward 1991, "Adaptive Shadow
@@ -25,111 +18,17 @@
 //!   accumulated so far; the untested remainder is then added times the
 //!   hit rate of the tested lights, `visible / tested` counted in lights,
 //!   1/2 if none was tested (the contributions are computed in `f32`, which
-//!   changes nothing at the errors Ward's thresholds allow). This is the rule of Radiance's `direct()` with `-dt t -dc 1` (`-dc 1`
-//!   compares the whole untested remainder; smaller values compare only the
-//!   next `n^dc` lights), without Radiance's per-light hit statistics
-//!   gathered across the image (every point here is independent). The order
-//!   is found in growing blocks (select the next block's lights in linear
-//!   time, then sort the block), so that a point that stops early does not
-//!   sort every light; ties are broken by light index.
+//!   changes nothing at the errors Ward's thresholds allow). This is the
+//!   rule of Radiance's `direct()` with `-dt t -dc 1` (`-dc 1` compares the
+//!   whole untested remainder; smaller values compare only the next `n^dc`
+//!   lights), without Radiance's per-light hit statistics gathered across
+//!   the image (every point here is independent). The order is found in
+//!   growing blocks (select the next block's lights in linear time, then
+//!   sort the block), so that a point that stops early does not sort every
+//!   light; ties are broken by light index.
 
 use glam::{DVec3, Vec3};
 use manylights::{PointLight, Visibility};
-
-use crate::city::City;
-use crate::scenes::{Material, Rng, Scene, ShadingPoint};
-
-/// Blocks along each side of the city (as in `city --shadows`).
-pub const BLOCKS: u32 = 16;
-/// Share of the shading points on the ground; the rest are on façades.
-const GROUND_SHARE: f64 = 0.5;
-/// Façade points stay this far below the roof and above the ground.
-const FACADE_MARGIN: f32 = 0.5;
-
-/// The occluded scene: lights, shading points and material as in every
-/// scene, plus the buildings.
-pub struct Occluded {
-    /// Lights, points and material.
-    pub scene: Scene,
-    /// The buildings and their BVH.
-    pub city: City,
-}
-
-/// `city-shadows`: `city --shadows`'s city of [`BLOCKS`] x [`BLOCKS`]
-/// blocks with `lights` lights (80% street lamps, 20% lit windows), and
-/// `points` shading points, half on the streets (uniform over the city,
-/// outside the buildings) and half on the buildings' walls (a uniform
-/// building, wall, position along it and height), grey Lambert.
-pub fn city_shadows(lights: usize, points: usize, seed: u64) -> Occluded {
-    let city = City::new(BLOCKS, lights);
-    let mut rng = Rng::new(seed ^ 0x5AD0);
-    let (lo, hi) = city.lights.iter().fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), l| (lo.min(l.position), hi.max(l.position)),
-    );
-    let inside = |p: Vec3| {
-        city.buildings.iter().any(|b| {
-            p.x >= b.bounds.min.x
-                && p.x <= b.bounds.max.x
-                && p.y >= b.bounds.min.y
-                && p.y <= b.bounds.max.y
-        })
-    };
-    let ground = (points as f64 * GROUND_SHARE).round() as usize;
-    let mut shading = Vec::with_capacity(points);
-    while shading.len() < ground {
-        let p = Vec3::new(rng.range(lo.x, hi.x), rng.range(lo.y, hi.y), 0.0);
-        if !inside(p) {
-            shading.push(ShadingPoint {
-                point: p,
-                normal: Vec3::Z,
-                view: Vec3::Z,
-            });
-        }
-    }
-    while shading.len() < points {
-        let b = city.buildings[(rng.next_u64() % city.buildings.len() as u64) as usize].bounds;
-        let wall = rng.next_u64() % 4;
-        // Axis across the wall, and its side.
-        let (across, side) = ((wall / 2) as usize, wall % 2);
-        let along = 1 - across;
-        let mut p = Vec3::ZERO;
-        p[across] = if side == 0 {
-            b.min[across]
-        } else {
-            b.max[across]
-        };
-        p[along] = rng.range(b.min[along], b.max[along]);
-        p.z = rng.range(FACADE_MARGIN, b.max.z - FACADE_MARGIN);
-        let mut normal = Vec3::ZERO;
-        normal[across] = if side == 0 { -1.0 } else { 1.0 };
-        shading.push(ShadingPoint {
-            point: p,
-            normal,
-            view: normal,
-        });
-    }
-    let scene = Scene {
-        name: "city-shadows",
-        description: format!(
-            "the city of `city --shadows` with occluders: {} lights (street lamps, a fifth lit \
-             windows), {} box buildings, {BLOCKS}x{BLOCKS} blocks, ~{}x{} units; \
-             points half on the streets, half on the façades; reference = exact shadowed sum \
-             (one shadow ray per light)",
-            city.lights.len(),
-            city.buildings.len(),
-            (hi.x - lo.x).round(),
-            (hi.y - lo.y).round()
-        ),
-        lights: city.lights.clone(),
-        points: shading,
-        material: Material {
-            kd: Vec3::splat(0.5),
-            specular: None,
-        },
-    };
-    Occluded { scene, city }
-}
 
 /// Lights per chunk of [`ShadowLights`]' position arrays.
 const LANES: usize = 8;
@@ -143,7 +42,7 @@ struct Chunk {
 /// The lights of a Lambert scene as the two occluded baselines read them:
 /// positions in `f32` structure-of-arrays chunks, so that the unoccluded
 /// geometric term `max(0, n.(x - p)) / d^3` of every light is computed by a
-/// vectorized loop (as the exact sum of `report/exact.rs`), and per light the
+/// vectorized loop (as the exact sum of [`crate::exact`]), and per light the
 /// colour `I kd` and its largest channel.
 pub struct ShadowLights {
     chunks: Vec<Chunk>,

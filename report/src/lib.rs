@@ -1,0 +1,35 @@
+//! Scenes, baselines and the error-against-time report of the `manylights`
+//! crate (an unpublished workspace member).
+//!
+//! * [`scenes`]: every procedural scene, generated from a seed with `rand`.
+//! * Rendering helpers of the examples: [`camera`], [`raycast`] (primary
+//!   rays through the night city), [`bvh`], [`shadows`] (the night city's
+//!   visibility host), [`image`] (PNG output), [`compare`] (the certified
+//!   check, error statistics and the printed table), [`options`].
+//! * The report (binary `report`): the baselines [`exact`] (the exact sum,
+//!   vectorized), [`sampling`] (Monte Carlo light sampling after Shirley et
+//!   al. 1996 and Conty & Kulla 2018) and [`shadowed`] (the exact shadowed
+//!   sum and Ward 1991); [`measure`], the sweeps ([`config`], [`sweep`],
+//!   [`occluded`], [`scaling`]), [`plot`], [`csv`], [`summary`], and the
+//!   ground scene's evaluations-per-point table ([`evaluations`]).
+
+pub mod bvh;
+pub mod camera;
+pub mod compare;
+pub mod config;
+pub mod csv;
+pub mod evaluations;
+pub mod exact;
+pub mod image;
+pub mod measure;
+pub mod occluded;
+pub mod options;
+pub mod plot;
+pub mod raycast;
+pub mod sampling;
+pub mod scaling;
+pub mod scenes;
+pub mod shadowed;
+pub mod shadows;
+pub mod summary;
+pub mod sweep;

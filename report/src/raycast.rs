@@ -1,0 +1,191 @@
+//! Primary rays through the night city: the nearest hit on the ground or a
+//! building, through the BVH over the buildings; and [`CityView`], what the
+//! `city` and `shadows` examples render.
+
+use std::cell::Cell;
+use std::error::Error;
+use std::time::Duration;
+
+use glam::{DVec3, Vec3};
+use manylights::{Lambert, LightTree, ShadeError, ShadeResult, Shading};
+
+use crate::bvh::{entry_normal, slab};
+use crate::camera::Camera;
+use crate::compare::{ErrorStats, print_row, shade_pixels, timed};
+use crate::image::write_comparison;
+use crate::options::Options;
+use crate::scenes::{City, GROUND_ALBEDO};
+
+/// A primary-ray hit: the shading point, its outward normal, its albedo.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Point on the surface.
+    pub point: Vec3,
+    /// Unit outward normal.
+    pub normal: Vec3,
+    /// Diffuse albedo.
+    pub albedo: Vec3,
+}
+
+impl City {
+    /// The nearest surface hit by the ray `origin + t * dir`, `t > 0`.
+    pub fn intersect(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
+        let inv_dir = dir.recip();
+        let ground_t = if dir.z < 0.0 {
+            -origin.z / dir.z
+        } else {
+            f32::INFINITY
+        };
+        let nearest = Cell::new((ground_t, None::<usize>));
+        self.bvh.any(
+            |b| {
+                let (near, far) = slab(origin, inv_dir, b);
+                near <= far && far > 0.0 && near < nearest.get().0
+            },
+            |i| {
+                let (near, far) = slab(origin, inv_dir, &self.buildings[i].bounds);
+                if near <= far && near > 0.0 && near < nearest.get().0 {
+                    nearest.set((near, Some(i)));
+                }
+                false
+            },
+        );
+        let (t, building) = nearest.get();
+        if !t.is_finite() {
+            return None;
+        }
+        let point = origin + dir * t;
+        Some(match building {
+            None => Hit {
+                point,
+                normal: Vec3::Z,
+                albedo: GROUND_ALBEDO,
+            },
+            Some(i) => {
+                let b = &self.buildings[i];
+                Hit {
+                    point,
+                    normal: entry_normal(origin, inv_dir, &b.bounds, dir),
+                    albedo: b.albedo,
+                }
+            }
+        })
+    }
+
+    /// Casts one primary ray per pixel of `camera`'s image: the hit of each
+    /// pixel in row-major order, `None` for the sky.
+    pub fn trace(&self, camera: &Camera) -> Vec<Option<Hit>> {
+        camera.trace(|origin, dir| self.intersect(origin, dir))
+    }
+}
+
+/// An image from per-pixel unit-albedo `values` (`None` for the sky, black),
+/// each times its hit's albedo: Lambert is linear in `kd`, so this equals
+/// shading with the albedo.
+fn albedo_image(hits: &[Option<Hit>], values: impl Iterator<Item = Option<DVec3>>) -> Vec<DVec3> {
+    hits.iter()
+        .zip(values)
+        .map(|(hit, v)| match (hit, v) {
+            (Some(h), Some(v)) => v * h.albedo.as_dvec3(),
+            _ => DVec3::ZERO,
+        })
+        .collect()
+}
+
+/// Percentile of the exact image that the exposure maps to white.
+const EXPOSURE_PERCENTILE: f64 = 0.995;
+
+/// Where a camera looks at a night city from: eye, target, vertical field
+/// of view in degrees.
+pub type Shot = (Vec3, Vec3, f32);
+
+/// A night city seen by a camera: the city, its light tree, each pixel's
+/// primary-ray hit, and the times the build and the rays took.
+pub struct CityView {
+    /// The city.
+    pub city: City,
+    /// The tree over its lights.
+    pub tree: LightTree,
+    /// Each pixel's hit, row-major, `None` for the sky.
+    pub hits: Vec<Option<Hit>>,
+    /// Time of the tree build.
+    pub build_time: Duration,
+    /// Time of the primary rays.
+    pub trace_time: Duration,
+}
+
+impl CityView {
+    /// A city of `blocks x blocks` blocks with `options.lights` lights from
+    /// `seed`, its tree, and the hits of an `options.size()` image from
+    /// `shot`.
+    pub fn new(
+        blocks: u32,
+        seed: u64,
+        options: &Options,
+        shot: Shot,
+    ) -> Result<Self, Box<dyn Error>> {
+        let city = City::new(blocks, options.lights, seed);
+        let (tree, build_time) = timed(|| LightTree::build(&city.lights));
+        let (eye, target, fov_degrees) = shot;
+        let camera = Camera::new(eye, target, fov_degrees, options.width, options.height);
+        let (hits, trace_time) = timed(|| city.trace(&camera));
+        Ok(Self {
+            tree: tree?,
+            city,
+            hits,
+            build_time,
+            trace_time,
+        })
+    }
+
+    /// Shades every hit pixel in parallel with `shade(session, hit)`, the
+    /// sessions with unit albedo (Lambert is linear in `kd`: [`Self::finish`]
+    /// multiplies each pixel by its albedo afterwards); returns the values
+    /// and the time taken.
+    pub fn shade<T: Send>(
+        &self,
+        shade: impl Fn(&mut Shading<'_, Lambert>, &Hit) -> Result<T, ShadeError> + Sync + Send,
+    ) -> Result<(Vec<Option<T>>, Duration), ShadeError> {
+        let session = || self.tree.shading(Lambert::new(Vec3::ONE));
+        let (values, time) = timed(|| shade_pixels(&self.hits, session, shade));
+        Ok((values?, time))
+    }
+
+    /// Prints the rows that say what was rendered: lights, buildings (if
+    /// `buildings`), image, pixels, threshold, primary rays.
+    pub fn print_setup(&self, options: &Options, buildings: bool) {
+        print_row("lights", self.tree.len());
+        if buildings {
+            print_row("buildings", self.city.buildings.len());
+        }
+        print_row("image", format!("{}x{}", options.width, options.height));
+        print_row("shaded pixels", self.hits.iter().flatten().count());
+        print_row("threshold (relative)", options.threshold);
+        let trace = self.trace_time.as_secs_f64();
+        print_row("primary rays", format!("{trace:.3} s"));
+    }
+
+    /// Writes `<name>_{tree,exact,diff}.png` under `options.out` from the
+    /// unit-albedo results, each pixel times its albedo, then fails if a
+    /// pixel breaks the certified bound (`stats`).
+    pub fn finish(
+        &self,
+        options: &Options,
+        name: &str,
+        results: &[Option<ShadeResult>],
+        exact: &[Option<DVec3>],
+        stats: &ErrorStats,
+    ) -> Result<(), Box<dyn Error>> {
+        let tree_image = albedo_image(&self.hits, results.iter().map(|r| r.map(|r| r.radiance)));
+        write_comparison(
+            &options.out,
+            name,
+            options.size(),
+            &tree_image,
+            &albedo_image(&self.hits, exact.iter().copied()),
+            options.threshold,
+            EXPOSURE_PERCENTILE,
+        )?;
+        stats.ensure_certified()
+    }
+}
