@@ -131,7 +131,7 @@ pub use error::{BuildError, ShadeError, ValidationError};
 pub use geometry::{Aabb, Cone, Surface};
 pub use lambert::{BoundKind, Lambert};
 pub use light::PointLight;
-pub use phong::Phong;
+pub use phong::{Mirror, Phong};
 pub use shader::{Combined, NodeEstimate, Shader, ViewIndependent};
 pub use shading::{
     Accepts, NoView, Query, ShadeResult, Shading, Stop, Target, Threshold, WithView,
