@@ -4,7 +4,7 @@ use glam::{DVec3, Vec3};
 
 use crate::ShadeError;
 use crate::geometry::{Cone, Surface};
-use crate::numeric::SECOND_ORDER_SLACK;
+use crate::numeric::{SECOND_ORDER_SLACK, dot_of_difference};
 use crate::shader::{NodeEstimate, Shader, ViewIndependent, colour_or_clamped, try_colour};
 use crate::tree::Node;
 
@@ -157,11 +157,26 @@ fn quadratic_form(s: &[f64; 6], e: DVec3) -> f64 {
 /// Lowest and highest value of `n.(x - p)` over the node's box (heights
 /// above the tangent plane at the shading point), widened outward by the
 /// rounding of the box's `f64` support function (a few ulps of the
-/// coordinates' magnitude).
+/// coordinates' magnitude). Whether the box lies at or below the plane is
+/// decided exactly ([`Aabb::lies_at_or_below`](crate::Aabb::lies_at_or_below)),
+/// with no slack: then the highest value returned is at most 0, so a box
+/// lying exactly in the plane is recognised as contributing 0.
 #[inline]
 fn box_heights(node: &Node, surface: &Surface) -> (f64, f64) {
-    node.aabb
-        .extent_along(surface.point, surface.normal, SECOND_ORDER_SLACK)
+    let (lowest, highest) =
+        node.aabb
+            .extent_along(surface.point, surface.normal, SECOND_ORDER_SLACK);
+    // Only a box reaching below the plane (lowest <= 0, a necessary
+    // condition) but not certainly below it needs the exact test.
+    if lowest <= 0.0
+        && highest > 0.0
+        && node
+            .aabb
+            .lies_at_or_below(surface.point, surface.given_normal)
+    {
+        return (lowest.min(0.0), 0.0);
+    }
+    (lowest, highest)
 }
 
 impl Shader for Lambert {
@@ -170,17 +185,26 @@ impl Shader for Lambert {
     #[inline]
     fn prepare(&self, _surface: &Surface) {}
 
+    /// The model's term `I kd max(0, n.w) / d^2` with `n = N / |N|` for the
+    /// given normal `N`, computed as `N.(x - p) / (|N| d^3)`. For a
+    /// `position` holding `f32` values (every light's), the sign of `N.(x -
+    /// p)` is exact and its value within `2^-40` relative, within about
+    /// `f64::EPSILON` near the plane (error-free transformations, see
+    /// [`numeric`](crate::numeric)): a light in the tangent plane
+    /// contributes exactly 0, one barely above it its value to a few ulps.
     #[inline]
     fn eval(&self, _: &(), surface: &Surface, position: DVec3, intensity: DVec3) -> DVec3 {
-        let delta = position - surface.point;
-        let d2 = delta.length_squared();
-        let z = surface.normal.dot(delta);
-        // d = 0 (a light on the shading point) and lights at or below the
-        // tangent plane contribute nothing.
-        if !(z > 0.0 && d2 > 0.0) {
+        let normal = surface.given_normal.as_dvec3();
+        let height = dot_of_difference(normal, position, surface.point);
+        // Lights at or below the tangent plane contribute nothing; so does a
+        // light on the shading point (d = 0), whose height is exactly 0.
+        if !(height > 0.0) {
             return DVec3::ZERO;
         }
-        intensity * self.kd * (z / (d2 * d2.sqrt()))
+        let d2 = (position - surface.point).length_squared();
+        // |N| d^3 = d^2 sqrt(|N|^2 d^2): one square root.
+        let scale = d2 * (normal.length_squared() * d2).sqrt();
+        intensity * self.kd * (height / scale)
     }
 
     #[inline]

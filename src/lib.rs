@@ -45,20 +45,29 @@
 //! ```
 //!
 //! `V_i` is the host's point-to-point visibility (1 without a
-//! [`Visibility`]). Conventions, identical in [`Shading::exact_query`] and
-//! every bound:
+//! [`Visibility`]). The caller's `f32` point, normal, view and light
+//! positions are taken as exact real numbers. Conventions, identical in
+//! [`Shading::exact_query`] and every bound:
 //!
 //! * a light exactly on the shading point (`d_i = 0`) contributes 0 (its
 //!   direction is undefined; the model's limit depends on the approach);
 //! * `max(0, c)^e` is 0 for `c <= 0`, also when `e = 0`;
-//! * normals and views need not be unit: they are normalized in `f64`; zero
-//!   or non-finite ones are refused with [`ShadeError`];
+//! * normals and views need not be unit: the model uses `n = N / |N|` and
+//!   `v = V / |V|` of the given `N` and `V`, exactly; zero or non-finite
+//!   ones are refused with [`ShadeError`];
 //! * `n . v < 0` (the eye below the surface): the Phong formula is applied as
 //!   written (see [`Phong`]); hosts flip normals for two-sided shading.
 //!
 //! [`Shading::exact_query`] (and its one-line form [`Shading::exact`]) sums
 //! the model over every light in `f64` with compensated summation: it is the
-//! reference, and nothing else.
+//! reference, and nothing else. Where the model jumps, each term is decided
+//! exactly from the `f32` inputs: whether a light lies above the tangent
+//! plane (the sign of `N . (x_i - p)`), and whether it lies inside the Phong
+//! lobe (the sign of `r . w_i`, which is that of `R . (x_i - p)` with `R = 2
+//! (N.V) N - (N.N) V`: a polynomial in the inputs, no square root). Both
+//! come from error-free transformations ([`numeric`]), so a light exactly in
+//! the tangent plane or on the lobe's border contributes exactly 0, and one
+//! barely off it its value to about `1e-12` relative.
 //!
 //! # Shading a point
 //!
@@ -80,12 +89,31 @@
 //! ([`ShadeResult::certifies`] checks it; [`ShadeResult::ROUNDING_ALLOWANCE`]
 //! is `1e-9`)
 //!
-//! per channel `k`, provided the host's visibility classification is
+//! per channel `k`, with `exact` the model above (the inputs taken as exact
+//! real numbers), provided the host's visibility classification is
 //! conservative ([`Visibility`]). Every node bound rounds its absolute
 //! errors outward (the slacks of [`numeric`], upward rounding of stored
 //! radii and moments), and the cut folds its own `f64` summation error into
 //! the bound; the allowance covers what is left, the relative rounding of
 //! single terms and of the reference sum.
+//!
+//! Where a term jumps, no allowance is needed, and none is widened: a
+//! single light's term is exactly 0 when the model's is (in the tangent
+//! plane; on or behind the Phong lobe's border, also for `e = 0`, where the
+//! model is discontinuous), because its sign is decided exactly. Phong at
+//! the lobe's border is evaluated exactly, not given a wider allowance. With
+//! the default [`BoundKind::Tight`], a node whose box lies at or below the
+//! tangent plane is settled as exactly 0 by an exact test, so lights
+//! exactly in the tangent plane cost a few evaluations, not a walk of the
+//! tree. A Lambert term is within `2^-40` (about `9e-13`) relative, within
+//! about `f64::EPSILON` near the plane; a Phong term within about `4e-12`
+//! for every exponent up to [`Phong::MAX_EXPONENT`] (see [`Phong`]).
+//!
+//! `f64` sets one limit: a term below `f64::MIN_POSITIVE` (`2.2e-308`) is
+//! subnormal, rounded to a multiple of `2^-1074` whatever its relative
+//! accuracy, so in that range the contract holds up to an absolute few
+//! `2^-1074` per light.
+//!
 //! When a budget stops the cut before a node whose ball contains the shading
 //! point was refined, the bound is `+inf` (nothing finite is certain there).
 //!
@@ -131,7 +159,7 @@ pub use error::{BuildError, ShadeError, ValidationError};
 pub use geometry::{Aabb, Cone, Surface};
 pub use lambert::{BoundKind, Lambert};
 pub use light::PointLight;
-pub use phong::Phong;
+pub use phong::{Mirror, Phong};
 pub use shader::{Combined, NodeEstimate, Shader, ViewIndependent};
 pub use shading::{
     Accepts, NoView, Query, ShadeResult, Shading, Stop, Target, Threshold, WithView,

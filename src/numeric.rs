@@ -1,10 +1,22 @@
-//! Rounding: the compensated sum, outward rounding to `f32`, and every
-//! slack the certified bounds widen by, each with its derivation.
+//! Rounding: the compensated sum, outward rounding to `f32`, every slack
+//! the certified bounds widen by (each with its derivation), and the
+//! error-free transformations that decide signs exactly.
 //!
 //! The contract (see [`ShadeResult::ROUNDING_ALLOWANCE`](crate::ShadeResult::ROUNDING_ALLOWANCE))
 //! lets *relative* rounding of order `1e-12` pass; everything that can
 //! cancel (cosines near 0, Taylor sums whose terms cancel) is widened here by
 //! an *absolute* amount instead, so no bound is lost to rounding.
+//!
+//! Where the model itself changes at a sign (a light in the tangent plane,
+//! at the border of a Phong lobe), no slack can help: a light's term must be
+//! exactly 0 on one side. There the sign is computed exactly from the
+//! caller's `f32` data, with error-free transformations (Knuth's TwoSum,
+//! Dekker's TwoProduct), a compensated dot product in the style of Ogita,
+//! Rump and Oishi's `Dot2` (*Accurate sum and dot product*, SIAM J. Sci.
+//! Comput. 26(6), 2005) as a fast path, and Shewchuk's exact expansion
+//! arithmetic (*Adaptive precision floating-point arithmetic and fast robust
+//! geometric predicates*, Discrete Comput. Geom. 18, 1997) where the fast
+//! path cannot decide.
 
 use glam::DVec3;
 
@@ -43,6 +55,66 @@ pub const BUILD_LENGTH_SLACK: f64 = 8.0 * f64::EPSILON;
 /// million lights with margin.
 pub const SUM_TOLERANCE: f64 = 1e-9;
 
+/// Acceptance threshold of the plain `f64` evaluation of `a . (x - p)` in
+/// the exact-sign dot products behind [`Lambert`](crate::Lambert)'s terms
+/// and box test (and, multiplied by the exponent, [`Phong`](crate::Phong)'s
+/// terms): its result `z` is kept when `|z| >= NAIVE_DOT_ACCEPT * sum_j
+/// |fl(a_j (x_j - p_j))|`; closer to 0 the compensated dot product takes
+/// over (see [`DOT2_ACCEPT`]).
+///
+/// Derivation, with `u = 2^-53` the unit roundoff: one rounded subtraction,
+/// one product and two additions per term give `|z - exact| <= gamma_4 T`
+/// (Higham, *Accuracy and Stability of Numerical Algorithms*, 2002, 3.1),
+/// `gamma_4 = 4u / (1 - 4u)`, `T = sum_j |a_j||x_j - p_j|`, and the computed
+/// magnitude is at least `(1 - gamma_3) T`. With `|z| >= 2^-10` times it
+/// the relative error is below `4u 2^10 (1 + 8u) < 2^-40` (about `9e-13`,
+/// a thousandth of the rounding allowance; the factor 2 to spare also
+/// covers the one more addition of Phong's `R_lo . (x - p)`), and the sign
+/// is exact. In a
+/// scene of lights spread over the hemisphere, all but the lights within
+/// about `0.1` degree of the tangent plane pass.
+pub const NAIVE_DOT_ACCEPT: f64 = 1.0 / 1024.0;
+
+/// Acceptance threshold of the compensated dot product behind the exact
+/// signs of [`Lambert`](crate::Lambert) and [`Phong`](crate::Phong): its
+/// result `res` for `a . (x - p)` is kept when
+/// `|res| >= DOT2_ACCEPT * sum_j |a_j| |x_j - p_j|`, and the exact expansion
+/// decides otherwise.
+///
+/// Derivation, with `u = 2^-53` the unit roundoff and `T = sum_j |a_j||x_j -
+/// p_j|`: the differences and the products with the leading part of `a` are
+/// error-free (TwoSum, TwoProduct), and so is the running sum of the
+/// products; what is left are at most 12 small terms (the errors of the
+/// sums and products, `a_hi e` and `a_lo d` with `e` the subtraction's error
+/// and `a_lo <= 2u a_hi`), of total magnitude at most about `6u T`, summed
+/// with at most 6 roundings each: an error of at most `37 u^2 T`. The
+/// omitted `a_lo e` adds `2 u^2 T` and an `a` given to `4 u^2` of its size
+/// (Phong's mirror direction) `4 u^2 T`: `43 u^2 T` in all, plus `u |res|`
+/// for the final addition. With `|res| >= 256 u T` (this constant, `128 *
+/// f64::EPSILON`, about `2.8e-14`) that is at most `1.17 u |res| <
+/// f64::EPSILON * |res|`: the sign of `res` is the exact sign and its
+/// relative error is below `f64::EPSILON`. The factor of about 3 between
+/// `43 u^2 T` and what the constant allows also covers the rounding of `T`
+/// itself (`3u` relative).
+pub const DOT2_ACCEPT: f64 = 128.0 * f64::EPSILON;
+
+/// Phong exponents above which a light near the lobe's axis (cosine above
+/// `1/2`) has its lobe computed from `1 - cos = sin^2 / (1 + cos)`, the sine
+/// from a compensated cross product, rather than from the cosine itself.
+///
+/// Derivation, with `u = 2^-53`: the cosine `R.(x - p) / (|R| d)` carries,
+/// besides its numerator's relative error (kept below `2^-41 / e`, see
+/// [`NAIVE_DOT_ACCEPT`]), about `11u` (`5u` from `|R| = |N|^2 |V|`, `4u`
+/// from `d`, two roundings), and the lobe `exp(e ln cos)` `e` times all
+/// that: below `2^-41 + 512 * 11u`, about `1.1e-12`, for `e <= 512`. Above
+/// it, near the axis, where the lobe of a large exponent lives, that would
+/// reach `1e-9` at `e = 1e6`; `1 - cos` from the sine has a relative error of
+/// about `30u`, and the lobe then `|e ln cos| 30u`, at most about `4e-12`
+/// wherever it does not underflow (`|e ln cos| < 1130` even with the
+/// largest `I ks / d^2`). Below `cos = 1/2`, `|ln cos| > 0.69` bounds the
+/// cosine route's error the same way.
+pub const PHONG_SINE_ROUTE_ABOVE: f64 = 512.0;
+
 /// Rounds a non-negative `f64` up to the nearest `f32` at or above it, so a
 /// stored radius or moment never understates the value it bounds.
 #[must_use]
@@ -75,6 +147,243 @@ impl CompensatedSum {
     }
 }
 
+/// Knuth's TwoSum (Knuth, *The Art of Computer Programming* vol. 2;
+/// Shewchuk 1997, `TWO-SUM`): `s = fl(a + b)` and `e` with `s + e = a + b`
+/// exactly, `|e| <= ulp(s) / 2`, for any finite `a`, `b` whose sum does not
+/// overflow. No branch, no precondition on the order of magnitudes.
+#[inline]
+#[must_use]
+pub(crate) fn two_sum(a: f64, b: f64) -> (f64, f64) {
+    let s = a + b;
+    let b_virtual = s - a;
+    let a_virtual = s - b_virtual;
+    (s, (a - a_virtual) + (b - b_virtual))
+}
+
+/// Dekker's FastTwoSum (Dekker, *A floating-point technique for extending
+/// the available precision*, Numer. Math. 18, 1971): like [`two_sum`], exact
+/// when `a`'s exponent is at least `b`'s (in particular when `|a| >= |b|`),
+/// as Shewchuk's `COMPRESS` guarantees where it is used.
+#[inline]
+#[must_use]
+fn fast_two_sum(a: f64, b: f64) -> (f64, f64) {
+    let s = a + b;
+    (s, b - (s - a))
+}
+
+/// TwoProduct (Dekker 1971; here with a fused multiply-add, as in Ogita,
+/// Rump and Oishi 2005): `p = fl(a b)` and `e` with `p + e = a b` exactly,
+/// provided `a b` does not overflow and `e` does not underflow. The latter
+/// holds when `a` and `b` are multiples of `2^-k` and `2^-l` with
+/// `k + l <= 1074`. In this crate one factor is an `f32` value, a product of
+/// two, or a component of an exact sum of products of three (a multiple of
+/// `2^-447`), the other an `f32` value, a difference of two or its rounding
+/// error (multiples of `2^-149`): every product is a multiple of `2^-596`.
+#[inline]
+#[must_use]
+pub(crate) fn two_product(a: f64, b: f64) -> (f64, f64) {
+    let p = a * b;
+    (p, a.mul_add(b, -p))
+}
+
+/// Up to `N` `f64` terms whose *exact* sum is wanted: the terms are kept
+/// unrounded (products enter as their [`two_product`] pair) and summed
+/// exactly as a floating-point expansion (Shewchuk 1997).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ExactSum<const N: usize> {
+    terms: [f64; N],
+    len: usize,
+}
+
+impl<const N: usize> ExactSum<N> {
+    /// No terms.
+    #[inline]
+    pub(crate) fn new() -> Self {
+        Self {
+            terms: [0.0; N],
+            len: 0,
+        }
+    }
+
+    /// Adds the term `x` (exactly).
+    #[inline]
+    pub(crate) fn add(&mut self, x: f64) {
+        debug_assert!(self.len < N, "ExactSum capacity {N} exceeded");
+        self.terms[self.len] = x;
+        self.len += 1;
+    }
+
+    /// Adds `a b` exactly, as its [`two_product`] pair (under that
+    /// function's no-underflow condition).
+    #[inline]
+    pub(crate) fn add_product(&mut self, a: f64, b: f64) {
+        let (p, e) = two_product(a, b);
+        self.add(p);
+        self.add(e);
+    }
+
+    /// The exact sum as a nonoverlapping expansion, components in
+    /// increasing magnitude, none zero (empty for a zero sum): Shewchuk's
+    /// (1997) `GROW-EXPANSION` with zero elimination, then `COMPRESS`, both
+    /// in place. Their sum equals the sum of the terms exactly; the largest
+    /// component has the sign of the sum and, as Shewchuk proves for
+    /// `COMPRESS`, differs from it by less than its own ulp.
+    pub(crate) fn expansion(&mut self) -> &[f64] {
+        let h = &mut self.terms;
+        // Grow the expansion h[..len] by one term at a time; it never has
+        // more components than terms read, so it never overwrites a term
+        // not yet read.
+        let mut len = 0;
+        for i in 0..self.len {
+            let mut q = h[i];
+            let mut k = 0;
+            for j in 0..len {
+                let (s, e) = two_sum(q, h[j]);
+                q = s;
+                if e != 0.0 {
+                    h[k] = e;
+                    k += 1;
+                }
+            }
+            if q != 0.0 {
+                h[k] = q;
+                k += 1;
+            }
+            len = k;
+        }
+        self.len = len;
+        if len == 0 {
+            return &[];
+        }
+        // COMPRESS: from the top down, then from the bottom up.
+        let mut bottom = len - 1;
+        let mut q = h[bottom];
+        for i in (0..len - 1).rev() {
+            let (s, small) = fast_two_sum(q, h[i]);
+            if small != 0.0 {
+                h[bottom] = s;
+                bottom -= 1;
+                q = small;
+            } else {
+                q = s;
+            }
+        }
+        h[bottom] = q;
+        let mut top = 0;
+        for i in bottom + 1..len {
+            let (s, small) = fast_two_sum(h[i], q);
+            if small != 0.0 {
+                h[top] = small;
+                top += 1;
+            }
+            q = s;
+        }
+        h[top] = q;
+        self.len = top + 1;
+        &self.terms[..self.len]
+    }
+
+    /// The sum: exact sign (0 only for an exact 0), within one ulp (the
+    /// largest component of the compressed [`expansion`](Self::expansion);
+    /// a relative error of at most about `f64::EPSILON`).
+    pub(crate) fn value(&mut self) -> f64 {
+        self.expansion().last().copied().unwrap_or(0.0)
+    }
+}
+
+/// The compensated fast path of `a . (x - p)`, with `a = hi + lo` given as a
+/// double-double (`|lo_j| <= 2u |hi_j|`, `u = 2^-53`, and `hi + lo` within
+/// `4 u^2 |hi|` of the `a` meant, per component): `Dot2` of Ogita, Rump and
+/// Oishi (2005, Algorithm 5.3), extended to the differences `x - p`, which
+/// TwoSum splits exactly into `d + e`.
+///
+/// Returns `Some(res)` when `|res| >= DOT2_ACCEPT * T`, `T = sum_j |hi_j d_j|`:
+/// then `res` has the exact sign of `a . (x - p)` (it is not 0) and a
+/// relative error below `f64::EPSILON` ([`DOT2_ACCEPT`] derives it). `None`
+/// otherwise (the value is within about `2^-45 T` of 0, or 0): the caller
+/// decides exactly. Needs [`two_product`]'s no-underflow condition.
+#[inline]
+#[must_use]
+pub(crate) fn dot2_of_difference(hi: DVec3, lo: DVec3, x: DVec3, p: DVec3) -> Option<f64> {
+    let (res, magnitude) = dot2_value(hi, lo, x, p);
+    (res.abs() >= DOT2_ACCEPT * magnitude).then_some(res)
+}
+
+/// The compensated `a . (x - p)` of [`dot2_of_difference`] without its
+/// acceptance test, and the magnitude `T = sum_j |fl(hi_j d_j)|`:
+/// `|res - a . (x - p)| <= u |res| + 43 u^2 T` (`u = 2^-53`; see
+/// [`DOT2_ACCEPT`]), whatever the cancellation.
+#[inline]
+#[must_use]
+pub(crate) fn dot2_value(hi: DVec3, lo: DVec3, x: DVec3, p: DVec3) -> (f64, f64) {
+    let (hi, lo, x, p) = (hi.to_array(), lo.to_array(), x.to_array(), p.to_array());
+    let mut sum = 0.0;
+    let mut small = 0.0;
+    let mut magnitude = 0.0;
+    for j in 0..3 {
+        let (d, e) = two_sum(x[j], -p[j]);
+        let (product, product_error) = two_product(hi[j], d);
+        let (s, sum_error) = two_sum(sum, product);
+        sum = s;
+        small += (product_error + sum_error) + (hi[j] * e + lo[j] * d);
+        magnitude += product.abs();
+    }
+    (sum + small, magnitude)
+}
+
+/// `a . (x - p)` exactly summed, for `a` given per coordinate as an exact
+/// expansion (a slice whose sum is `a_j`, e.g. `&[a_j]`): exact sign,
+/// within one ulp ([`ExactSum::value`]). `N`, the capacity, must be at
+/// least four times the number of components in all. Needs
+/// [`two_product`]'s no-underflow condition. The slow path behind
+/// [`dot2_of_difference`].
+#[cold]
+#[inline(never)]
+#[must_use]
+pub(crate) fn exact_dot_of_difference<const N: usize>(a: [&[f64]; 3], x: DVec3, p: DVec3) -> f64 {
+    let mut sum = ExactSum::<N>::new();
+    for (j, a_j) in a.iter().enumerate() {
+        let (d, e) = two_sum(x[j], -p[j]);
+        for &c in *a_j {
+            sum.add_product(c, d);
+            sum.add_product(c, e);
+        }
+    }
+    sum.value()
+}
+
+/// `a . (x - p)` for `a`, `x`, `p` holding `f32` values (any [`Surface`]'s
+/// point and given normal, any light's position): the sign is exact, the
+/// relative error below `2^-40`, and about `f64::EPSILON` at most when the
+/// value is within `2^-10` of its terms' magnitude (a light within about 0.1
+/// degree of the plane). Three tiers, each taken only when the one before
+/// cannot
+/// certify its result: plain `f64` ([`NAIVE_DOT_ACCEPT`]), the compensated
+/// [`dot2_of_difference`] ([`DOT2_ACCEPT`]), an exact expansion.
+///
+/// [`Surface`]: crate::Surface
+#[inline]
+#[must_use]
+pub(crate) fn dot_of_difference(a: DVec3, x: DVec3, p: DVec3) -> f64 {
+    let (z, magnitude) = plain_dot_of_difference(a, x, p);
+    if z.abs() >= NAIVE_DOT_ACCEPT * magnitude {
+        return z;
+    }
+    dot2_of_difference(a, DVec3::ZERO, x, p)
+        .unwrap_or_else(|| exact_dot_of_difference::<12>([&[a.x], &[a.y], &[a.z]], x, p))
+}
+
+/// `a . (x - p)` in plain `f64`, and the magnitude `sum_j |fl(a_j (x_j -
+/// p_j))|` its error is measured against: the result is within `gamma_4`
+/// (`4u / (1 - 4u)`, `u = 2^-53`) times the exact magnitude of the exact
+/// value (see [`NAIVE_DOT_ACCEPT`]).
+#[inline]
+#[must_use]
+pub(crate) fn plain_dot_of_difference(a: DVec3, x: DVec3, p: DVec3) -> (f64, f64) {
+    let terms = a * (x - p);
+    (terms.x + terms.y + terms.z, terms.abs().element_sum())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -84,6 +393,105 @@ mod tests {
         for x in [0.1f64, 1.0 / 3.0, 1e-40, 3.4e38, 0.0, 1.0] {
             assert!(f64::from(round_up_f32(x)) >= x, "{x}");
         }
+    }
+
+    #[test]
+    fn two_sum_and_two_product_are_error_free() {
+        let (s, e) = two_sum(1.0, 1e-30);
+        assert_eq!((s, e), (1.0, 1e-30));
+        // 0.1 + 0.2 of the two doubles is 0.3000000000000000166..., the
+        // double above it 0.3000000000000000444...: 2^-55 apart.
+        assert_eq!(two_sum(0.1, 0.2), (0.1 + 0.2, -(2f64.powi(-55))));
+        // (1 + 2^-30)^2 = 1 + 2^-29 + 2^-60: the last term is the error.
+        let a = 1.0 + 2f64.powi(-30);
+        assert_eq!(two_product(a, a), (1.0 + 2f64.powi(-29), 2f64.powi(-60)));
+    }
+
+    #[test]
+    fn exact_sum_survives_any_cancellation() {
+        let tiny = 2f64.powi(-1000);
+        for (terms, sum) in [
+            (vec![1e16, 1.0, -1e16, 1.0], 2.0),
+            (vec![1.0, tiny, -1.0], tiny),
+            (vec![2f64.powi(300), -tiny, -(2f64.powi(300))], -tiny),
+            (vec![3.0, -1.0, -2.0], 0.0),
+            (vec![], 0.0),
+        ] {
+            let mut exact = ExactSum::<8>::new();
+            terms.iter().for_each(|&t| exact.add(t));
+            assert_eq!(exact.value(), sum, "{terms:?}");
+        }
+        // 0.1 + 0.2 - 0.3 in exact arithmetic on the three doubles.
+        let mut exact = ExactSum::<4>::new();
+        [0.1, 0.2, -0.3].iter().for_each(|&t| exact.add(t));
+        assert_eq!(exact.value(), 2f64.powi(-55));
+    }
+
+    /// Integer terms (53-bit odd multiples of powers of two) with heavy
+    /// cancellation, checked against their exact `i128` sum.
+    #[test]
+    fn exact_sum_matches_integer_arithmetic() {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        for _ in 0..2000 {
+            let mut exact = ExactSum::<16>::new();
+            let mut reference = 0i128;
+            for _ in 0..8 {
+                let mantissa = (next() >> 11) as i64 | 1;
+                let shift = next() % 60;
+                let sign = if next() % 2 == 0 { 1 } else { -1 };
+                let term = i128::from(sign * mantissa) << shift;
+                // Each term and its near-negation: most bits cancel.
+                for t in [term, -(term >> 1 << 1) + (next() % 4) as i128] {
+                    exact.add(t as f64);
+                    reference += (t as f64) as i128;
+                }
+            }
+            let value = exact.value();
+            let reference_f64 = reference as f64;
+            assert_eq!((value > 0.0, value == 0.0), (reference > 0, reference == 0));
+            assert!(
+                (value - reference_f64).abs() <= 2.0 * f64::EPSILON * reference_f64.abs(),
+                "{value} vs {reference}"
+            );
+        }
+    }
+
+    #[test]
+    fn each_tier_of_the_exact_dot_gets_the_sign_right() {
+        let n = DVec3::ONE;
+        let light = DVec3::new(20.0, -19.0, -1.0);
+        // Exactly in the plane: the exact expansion decides, 0.
+        assert_eq!(dot_of_difference(n, light, DVec3::ZERO), 0.0);
+        // 2^-30 off: the compensated tier (exact here).
+        let p = DVec3::new(0.0, 0.0, -(2f64.powi(-30)));
+        assert_eq!(
+            dot2_of_difference(n, DVec3::ZERO, light, p),
+            Some(2f64.powi(-30))
+        );
+        assert_eq!(dot_of_difference(n, light, p), 2f64.powi(-30));
+        // 2^-40 off: within 2^-45 of the terms' magnitude 40, so exact.
+        let p = DVec3::new(0.0, 0.0, -(2f64.powi(-40)));
+        assert_eq!(dot2_of_difference(n, DVec3::ZERO, light, p), None);
+        assert_eq!(dot_of_difference(n, light, p), 2f64.powi(-40));
+        // 2^-149 off (the smallest f32): only the exact expansion sees it.
+        let p = DVec3::new(0.0, 0.0, -f64::from(f32::from_bits(1)));
+        assert_eq!(dot2_of_difference(n, DVec3::ZERO, light, p), None);
+        assert_eq!(dot_of_difference(n, light, p), f64::from(f32::from_bits(1)));
+        assert_eq!(
+            dot_of_difference(n, light, -p),
+            -f64::from(f32::from_bits(1))
+        );
+        // Far from the plane: plain f64.
+        assert_eq!(
+            dot_of_difference(n, DVec3::new(1.0, 2.0, 3.0), DVec3::ZERO),
+            6.0
+        );
     }
 
     #[test]

@@ -4,6 +4,10 @@ use glam::{DVec3, Vec3};
 
 use crate::ShadeError;
 use crate::geometry::{Cone, Surface};
+use crate::numeric::{
+    ExactSum, NAIVE_DOT_ACCEPT, PHONG_SINE_ROUTE_ABOVE, dot2_of_difference, dot2_value,
+    exact_dot_of_difference, plain_dot_of_difference,
+};
 use crate::shader::{NodeEstimate, Shader, colour_or_clamped, try_colour};
 use crate::tree::Node;
 
@@ -25,6 +29,28 @@ const LOBE_LOG_SPACE_BELOW: f64 = 1e-280;
 /// tangent plane and lights there are reflected; a host shading two-sided
 /// surfaces flips the normal towards the eye first. Lights below the tangent
 /// plane are not culled by this term (the model has no `n . w` factor).
+///
+/// # The lobe's border, exactly
+/// `n` and `v` are the given normal `N` and view `V` normalized exactly, so
+/// `r` involves square roots; but `r.w` has the sign of `R.(x - p)` with
+/// `R = 2 (N.V) N - (N.N) V = |N|^2 |V| r` ([`Mirror`]), a polynomial in the
+/// given `f32` values. Each light's term decides that sign exactly (plain
+/// `f64` when it is safely away from 0, then a compensated dot product,
+/// then exact expansion arithmetic: see [`numeric`](crate::numeric)). So a
+/// light on the border (`r.w = 0`) contributes exactly 0, also for `e = 0`
+/// where the model jumps there, and no allowance is widened near the
+/// border. The value: the cosine is `R.(x - p) / (|R| d)`, its numerator
+/// taken in plain `f64` only while that error times `e` stays below
+/// `2^-40` (compensated otherwise, within an ulp), `|R|` and `d` adding
+/// about 10 ulps; for `e <= 512` the lobe inherits `e` times that, below
+/// about `1.3e-12`. Above
+/// ([`PHONG_SINE_ROUTE_ABOVE`](crate::numeric::PHONG_SINE_ROUTE_ABOVE)),
+/// lights near the axis take `1 - cos = sin^2 / (1 + cos)` from a
+/// compensated cross product, which makes the lobe's relative error about
+/// `|e ln cos|` times 30 ulps: every lobe that does not underflow is within
+/// about `4e-12` relative, up to `e = 1e6`. A cosine below the
+/// smallest positive `f64` (only for inputs whose coordinates span hundreds
+/// of binary orders of magnitude) flushes the lobe to 0 when `e > 0`.
 ///
 /// # Node bound
 /// The paper's (slides "Specular Reflection"), valid whenever `D > R`: with
@@ -121,7 +147,13 @@ impl Phong {
         if self.exponent == 0.0 {
             return scale;
         }
-        let log_lobe = self.exponent * cos.ln();
+        self.lobe_from_log(scale, self.exponent * cos.ln())
+    }
+
+    /// `scale * exp(log_lobe)` per channel, in log space where the power
+    /// alone would underflow.
+    #[inline]
+    fn lobe_from_log(&self, scale: DVec3, log_lobe: f64) -> DVec3 {
         let lobe = log_lobe.exp();
         if lobe >= LOBE_LOG_SPACE_BELOW {
             return scale * lobe;
@@ -137,31 +169,178 @@ impl Phong {
     }
 }
 
-impl Shader for Phong {
-    /// The unit mirror direction `r`.
-    type PerPoint = DVec3;
+/// Phong's per-point data ([`Shader::PerPoint`]): the mirror direction of
+/// the view about the normal, as a unit vector for the node bounds and,
+/// unnormalized, for the exact sign of each light's cosine.
+///
+/// With `N` and `V` the normal and view exactly as given
+/// ([`Surface::given_normal`], [`Surface::given_view`]), the unit mirror
+/// direction `r = 2 (n.v) n - v` of their normalizations is `R / |R|` with
+///
+/// ```text
+/// R = 2 (N.V) N - (N.N) V,     |R| = |N|^2 |V|,
+/// ```
+///
+/// a polynomial in the given `f32` values: no square root stands between
+/// the inputs and the sign of `R . (x - p)`, which is the sign of `r.w`.
+/// `R` is kept as a double-double (each component within `4 u^2` of its
+/// size, `u = 2^-53`), from its exact expansion. Zero without a view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mirror {
+    /// Unit `r`, within a few ulps per component.
+    unit: DVec3,
+    /// Leading part of `R`: the largest component of its exact expansion.
+    unnormalized_hi: DVec3,
+    /// The rest of `R`, rounded: `|lo| <= 2u |hi|`.
+    unnormalized_lo: DVec3,
+    /// `|R| = |N|^2 |V|`, within a few ulps.
+    unnormalized_length: f64,
+}
 
-    #[inline]
-    fn prepare(&self, surface: &Surface) -> DVec3 {
-        let n = surface.normal;
-        let v = surface.view;
-        (2.0 * n.dot(v) * n - v).normalize_or_zero()
+impl Mirror {
+    /// The mirror direction `r` of the view about the normal, unit (zero
+    /// without a view).
+    #[must_use]
+    pub fn direction(&self) -> DVec3 {
+        self.unit
     }
 
+    /// `R x (x - p)`, each component a compensated `Dot2` of a permuted `R`
+    /// with `x - p`: within `u` of itself plus `43 u^2 |R| |x - p|`
+    /// ([`DOT2_ACCEPT`](crate::numeric::DOT2_ACCEPT), `u = 2^-53`).
+    fn cross(&self, x: DVec3, p: DVec3) -> DVec3 {
+        let (h, l) = (self.unnormalized_hi, self.unnormalized_lo);
+        let component = |a: [f64; 3], b: [f64; 3]| dot2_value(a.into(), b.into(), x, p).0;
+        DVec3::new(
+            component([0.0, -h.z, h.y], [0.0, -l.z, l.y]),
+            component([h.z, 0.0, -h.x], [l.z, 0.0, -l.x]),
+            component([-h.y, h.x, 0.0], [-l.y, l.x, 0.0]),
+        )
+    }
+
+    /// `R` and `|R|` for `surface`'s given normal and view.
+    fn new(surface: &Surface) -> Self {
+        let (n, v) = (surface.given_normal, surface.given_view);
+        let mut hi = [0.0; 3];
+        let mut lo = [0.0; 3];
+        for j in 0..3 {
+            let mut r_j = mirror_component(n, v, j);
+            if let Some((&top, rest)) = r_j.expansion().split_last() {
+                hi[j] = top;
+                let mut rest_sum = ExactSum::<12>::new();
+                rest.iter().for_each(|&c| rest_sum.add(c));
+                lo[j] = rest_sum.value();
+            }
+        }
+        let squared_length = |a: Vec3| {
+            let mut sum = ExactSum::<6>::new();
+            a.to_array()
+                .map(f64::from)
+                .iter()
+                .for_each(|&c| sum.add_product(c, c));
+            sum.value()
+        };
+        let length = squared_length(n) * squared_length(v).sqrt();
+        let (hi, lo) = (DVec3::from(hi), DVec3::from(lo));
+        Self {
+            unit: if length > 0.0 {
+                (hi + lo) / length
+            } else {
+                DVec3::ZERO
+            },
+            unnormalized_hi: hi,
+            unnormalized_lo: lo,
+            unnormalized_length: length,
+        }
+    }
+}
+
+/// Component `j` of `R = 2 (N.V) N - (N.N) V` as an exact sum of twelve
+/// terms: each `N_i V_i` and `N_i N_i` is exact in `f64` (48 bits), each
+/// product with a third `f32` value an exact TwoProduct pair.
+fn mirror_component(n: Vec3, v: Vec3, j: usize) -> ExactSum<12> {
+    let (n, v) = (n.as_dvec3(), v.as_dvec3());
+    let mut sum = ExactSum::new();
+    for i in 0..3 {
+        sum.add_product(2.0 * (n[i] * v[i]), n[j]);
+        sum.add_product(-(n[i] * n[i]), v[j]);
+    }
+    sum
+}
+
+/// `R . (x - p)` exactly summed (sign exact, within one ulp): the slow
+/// path, for lights within about `2^-45` of the lobe's border.
+#[cold]
+#[inline(never)]
+fn mirror_dot_exact(surface: &Surface, position: DVec3) -> f64 {
+    let (n, v) = (surface.given_normal, surface.given_view);
+    let [mut r_x, mut r_y, mut r_z] = [0, 1, 2].map(|j| mirror_component(n, v, j));
+    // At most 12 components per coordinate, four terms each.
+    exact_dot_of_difference::<144>(
+        [r_x.expansion(), r_y.expansion(), r_z.expansion()],
+        position,
+        surface.point,
+    )
+}
+
+impl Shader for Phong {
+    /// The mirror direction, unit and unnormalized.
+    type PerPoint = Mirror;
+
     #[inline]
-    fn eval(&self, r: &DVec3, surface: &Surface, position: DVec3, intensity: DVec3) -> DVec3 {
-        let delta = position - surface.point;
-        let d2 = delta.length_squared();
-        if d2 == 0.0 {
+    fn prepare(&self, surface: &Surface) -> Mirror {
+        Mirror::new(surface)
+    }
+
+    /// The model's term `I ks max(0, r.w)^e / d^2`, with `r.w = R.(x - p) /
+    /// (|R| d)` ([`Mirror`]). For a `position` holding `f32` values (every
+    /// light's) the sign of `R.(x - p)` is exact: a light on or behind the
+    /// lobe's border contributes exactly 0, also for `e = 0`. The value's
+    /// accuracy is in [`Phong`]'s docs ("The lobe's border, exactly").
+    #[inline]
+    fn eval(&self, mirror: &Mirror, surface: &Surface, position: DVec3, intensity: DVec3) -> DVec3 {
+        let (hi, lo) = (mirror.unnormalized_hi, mirror.unnormalized_lo);
+        // Plain f64 when its relative error, times e (the lobe's
+        // sensitivity to it), stays below 2^-40; else compensated; else
+        // exact. Adding `lo . d` is one more rounding: `gamma_5` of the
+        // magnitude instead of `gamma_4`, still below 2^-40 at the threshold.
+        let (plain, magnitude) = plain_dot_of_difference(hi, position, surface.point);
+        let plain = plain + lo.dot(position - surface.point);
+        let along = if plain.abs() >= NAIVE_DOT_ACCEPT * self.exponent.max(1.0) * magnitude {
+            plain
+        } else {
+            dot2_of_difference(hi, lo, position, surface.point)
+                .unwrap_or_else(|| mirror_dot_exact(surface, position))
+        };
+        // On or behind the lobe's border nothing; a light on the shading
+        // point (d = 0) has `along` exactly 0.
+        if !(along > 0.0) {
             return DVec3::ZERO;
         }
-        let cos = r.dot(delta) / d2.sqrt();
-        self.lobe(intensity * self.ks / d2, cos)
+        let d2 = (position - surface.point).length_squared();
+        let scale = intensity * self.ks / d2;
+        if self.exponent == 0.0 {
+            // The indicator of the open half-space around r: no cosine
+            // needed, so none can flush to zero.
+            return scale;
+        }
+        let length_times_d = mirror.unnormalized_length * d2.sqrt();
+        let cos = along / length_times_d;
+        let log_cos = if cos > 0.5 && self.exponent > PHONG_SINE_ROUTE_ABOVE {
+            // Near the axis of a narrow lobe: ln cos = ln(1 - t) with
+            // t = 1 - cos = sin^2 / (1 + cos), accurate however small.
+            let sin = mirror.cross(position, surface.point) / length_times_d;
+            (-(sin.length_squared() / (1.0 + cos))).ln_1p()
+        } else {
+            cos.ln()
+        };
+        self.lobe_from_log(scale, self.exponent * log_cos)
     }
 
     #[inline]
-    fn bound(&self, r: &DVec3, _surface: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
-        let (cos_lo, cos_hi) = cone.cos_range(*r);
+    fn bound(&self, mirror: &Mirror, _surface: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
+        let r = mirror.unit;
+        let (cos_lo, cos_hi) = cone.cos_range(r);
         if cos_hi <= 0.0 {
             return NodeEstimate::ZERO;
         }

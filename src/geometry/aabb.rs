@@ -2,6 +2,8 @@
 
 use glam::{DVec3, Vec3};
 
+use crate::numeric::dot_of_difference;
+
 /// An axis-aligned box, `min <= max` per axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Aabb {
@@ -48,5 +50,30 @@ impl Aabb {
             centre.abs().max_element() + half.max_element() + origin.abs().max_element();
         let slack = relative_slack * magnitude;
         (middle - reach - slack, middle + reach + slack)
+    }
+
+    /// The corner of the box farthest along `dir`: per axis `max` where
+    /// `dir`'s component is positive, `min` otherwise. It maximizes
+    /// `dir . x` over the box.
+    #[must_use]
+    pub fn corner_along(&self, dir: Vec3) -> Vec3 {
+        Vec3::select(dir.cmpgt(Vec3::ZERO), self.max, self.min)
+    }
+
+    /// Whether the whole box lies at or below the plane through `origin`
+    /// with normal `normal` (not necessarily unit): `normal . (x - origin)
+    /// <= 0` for every point `x` of the box. Decided *exactly* for an
+    /// `origin` holding `f32` values (as a [`Surface`](crate::Surface)'s
+    /// point does): the sign of the highest corner's height comes from an
+    /// error-free compensated dot product, with no slack, so a box lying
+    /// exactly in the plane counts as at or below it. The empty box, which
+    /// has no point, does too.
+    #[must_use]
+    pub fn lies_at_or_below(&self, origin: DVec3, normal: Vec3) -> bool {
+        if self.min.cmpgt(self.max).any() {
+            return true;
+        }
+        let corner = self.corner_along(normal);
+        dot_of_difference(normal.as_dvec3(), corner.as_dvec3(), origin) <= 0.0
     }
 }

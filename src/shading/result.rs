@@ -44,12 +44,13 @@ impl ShadeResult {
     /// `|radiance - exact| <= error_bound + ROUNDING_ALLOWANCE * exact` per
     /// channel.
     ///
-    /// What it covers: the relative rounding of single terms (a light's `f64`
-    /// evaluation is within about `1e-15` relative; a Phong lobe computed as
-    /// `exp(e ln cos)` within `|e ln cos| * 2^-52 <= 2.5e-13`), relative
-    /// rounding of node interval ends computed in `f64` (likewise `<=
-    /// 1e-12`), and the reference sum's own error (compensated, about
-    /// `2^-52`). `1e-9` leaves a margin of 1000 over the largest of these.
+    /// What it covers: the relative rounding of single terms (whose signs are
+    /// exact: a Lambert term is within `2^-40`, about `9e-13`, relative, a
+    /// Phong term within about `4e-12` for every exponent; see
+    /// [`Phong`](crate::Phong)), relative rounding of node interval ends
+    /// computed in `f64` (about `1e-12`), and the reference sum's own error
+    /// (compensated, about `2^-52`). `1e-9` leaves a margin of over 200 over
+    /// the largest of these.
     pub const ROUNDING_ALLOWANCE: f64 = 1e-9;
 
     /// `nodes_evaluated + lights_evaluated`: the work, in the units of
