@@ -307,17 +307,6 @@ fn quadratic_form(s: &[f64; 6], e: DVec3) -> f64 {
         + 2.0 * (s[3] * e.x * e.y + s[4] * e.x * e.z + s[5] * e.y * e.z)
 }
 
-/// `e^T S f` for the symmetric matrix stored as `[xx, yy, zz, xy, xz, yz]`.
-#[inline]
-fn bilinear_form(s: &[f64; 6], e: DVec3, f: DVec3) -> f64 {
-    s[0] * e.x * f.x
-        + s[1] * e.y * f.y
-        + s[2] * e.z * f.z
-        + s[3] * (e.x * f.y + e.y * f.x)
-        + s[4] * (e.x * f.z + e.z * f.x)
-        + s[5] * (e.y * f.z + e.z * f.y)
-}
-
 /// Lowest and highest value of `n.(x - p)` over the node's box (heights
 /// above the tangent plane at the shading point), widened outward by the
 /// rounding of the box's `f64` support function (a few ulps of the
@@ -556,17 +545,30 @@ impl Lambert {
             o[1].abs().element_sum(),
             o[2].abs().element_sum(),
         ) * inv_d;
+        // The degree-2 bracket is linear in S: one weight per stored entry
+        // [xx, yy, zz, xy, xz, yz], shared by the three channels.
+        let (a, b) = (15.0 * c0, 3.0 * c0);
+        let weights = [
+            a * uh.x * uh.x - b - 6.0 * uh.x * n.x,
+            a * uh.y * uh.y - b - 6.0 * uh.y * n.y,
+            a * uh.z * uh.z - b - 6.0 * uh.z * n.z,
+            2.0 * a * uh.x * uh.y - 6.0 * (uh.x * n.y + uh.y * n.x),
+            2.0 * a * uh.x * uh.z - 6.0 * (uh.x * n.z + uh.z * n.x),
+            2.0 * a * uh.y * uh.z - 6.0 * (uh.y * n.z + uh.z * n.y),
+        ];
         let mut second = DVec3::ZERO;
         let mut mu2 = DVec3::ZERO;
         for k in 0..3 {
-            let s = &node.channel_covariances[k].map(f64::from);
-            let trace = s[0] + s[1] + s[2];
-            let form = 15.0 * c0 * quadratic_form(s, uh)
-                - 3.0 * c0 * trace
-                - 6.0 * bilinear_form(s, uh, n);
-            second[k] = form * (0.5 * inv_d2);
-            mu2[k] = trace * inv_d2;
+            let s = &node.channel_covariances[k];
+            let mut form = 0.0;
+            for (entry, weight) in s.iter().zip(weights) {
+                form += f64::from(*entry) * weight;
+            }
+            second[k] = form;
+            mu2[k] = f64::from(s[0]) + f64::from(s[1]) + f64::from(s[2]);
         }
+        let second = second * (0.5 * inv_d2);
+        let mu2 = mu2 * inv_d2;
         let series = c0 + first + second;
 
         // Remainder in units of I_k / D^2. The quantities it grows with,
