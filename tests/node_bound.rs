@@ -2,13 +2,15 @@
 //! lights, on adversarial light sets, and the constants it relies on.
 //!
 //! Ranges (see the strategies): 1 to 300 lights per set, shaped as a ball,
-//! a slab, a line, two split clusters, a spherical shell or a street-lamp
-//! grid, of extent `10^-2` to `10^2` about a centre up to `10^4` from the
-//! origin; weights `10^u`, `u` uniform in `[-3, 3]`, times random colours
-//! (a channel exactly 0 with probability 1/8). Shading points at
+//! a slab, a line, two split clusters, a spherical shell, street lamps, a
+//! lopsided line or one point, along a random or a coordinate axis, of
+//! extent `10^-2` to `10^2` about a centre up to `10^4` from the origin;
+//! weights `10^u`, `u` uniform in `[-3, 3]`, times random colours (a
+//! channel exactly 0 with probability 1/8). Shading points at
 //! `D = R (1 + 10^t)` from a node's centroid, `t` in `[-5.5, 6]` (just
-//! outside the ball to a million radii), with facing, grazing, straddling,
-//! averted and random normals.
+//! outside the ball to a million radii), in a random direction or along the
+//! line to the node's farthest member, with facing, grazing (down to
+//! exactly perpendicular), straddling, averted and random normals.
 
 use glam::{DVec3, Vec3};
 use manylights::{
@@ -54,6 +56,13 @@ enum Shape {
     Split,
     Shell,
     Streets,
+    /// Members on a line through the centroid, all far ones on one side and
+    /// offset across it by `1e-4` (weights up to 1000 times larger near the
+    /// centre balance them): the terms of every degree add up when seen
+    /// along the line.
+    Lopsided,
+    /// Every member at one point.
+    Coincident,
 }
 
 /// A member's offset from the set's centre, in units of its extent, from a
@@ -82,6 +91,18 @@ fn place(shape: Shape, a: DVec3, s: f64, t: f64, axis: DVec3) -> DVec3 {
             };
             DVec3::new(x, y, 0.06 + 0.01 * a.z)
         }
+        Shape::Lopsided => {
+            if t < 0.25 {
+                // Offset across the line by 1e-4 along one direction, the
+                // next coordinate axis when the line is snapped to one.
+                let across = DVec3::new(axis.z, axis.x, axis.y);
+                let across = (across - axis * across.dot(axis)).normalize_or_zero();
+                axis * (1.0 - 1e-3 * s) + across * 1e-4
+            } else {
+                -axis * (1e-3 + 0.2 * s * s) + a * 1e-6
+            }
+        }
+        Shape::Coincident => DVec3::ZERO,
     }
 }
 
@@ -94,18 +115,33 @@ fn light_set() -> impl Strategy<Value = Vec<PointLight>> {
             Shape::Split,
             Shape::Shell,
             Shape::Streets,
+            Shape::Lopsided,
+            Shape::Coincident,
         ]),
-        unit(),
-        0.0f64..=4.0,
-        unit(),
-        -2.0f64..=2.0,
+        (unit(), 0.0f64..=4.0),
+        (unit(), any::<bool>(), -2.0f64..=2.0),
         prop::collection::vec((unit(), 0.0f64..=1.0, 0.0f64..=1.0, intensity()), 1..=300),
     )
         .prop_map(
-            |(shape, centre_dir, centre_exp, axis, extent_exp, members)| {
+            |(shape, (centre_dir, centre_exp), (axis, snap, extent_exp), members)| {
                 let centre =
                     centre_dir * 10f64.powf(centre_exp) * (centre_exp - 0.5).signum().max(0.0);
                 let extent = 10f64.powf(extent_exp);
+                // Half of the sets are aligned with a coordinate axis, so that
+                // their boxes are as thin as they are.
+                let axis = if snap {
+                    let a = axis.abs();
+                    let pick = if a.x >= a.y && a.x >= a.z {
+                        DVec3::X
+                    } else if a.y >= a.z {
+                        DVec3::Y
+                    } else {
+                        DVec3::Z
+                    };
+                    pick * axis.dot(pick).signum()
+                } else {
+                    axis
+                };
                 members
                     .into_iter()
                     .map(|(a, s, t, i)| {
@@ -125,7 +161,8 @@ enum Facing {
     Random,
     /// Towards the node, tilted by up to 0.3 rad.
     Towards,
-    /// Perpendicular to the axis, up to `1e-3` off.
+    /// Perpendicular to the axis, `n . uh` exactly 0 (one time in 20) or
+    /// `+-10^u`, `u` in `[-17, -3]`.
     Grazing,
     /// The tangent plane cuts the node's ball: `n . uh = sigma * t`.
     Straddling,
@@ -138,6 +175,11 @@ enum Facing {
 struct View {
     node: prop::sample::Index,
     direction: DVec3,
+    /// Whether the point lies (up to `10^aim`) on the line from the
+    /// centroid through its farthest member, on that member's side (`> 0`) or
+    /// the other, where pointwise bounds are tight; random otherwise.
+    along: i8,
+    aim: f64,
     distance_exp: f64,
     facing: Facing,
     other: DVec3,
@@ -148,6 +190,8 @@ fn view() -> impl Strategy<Value = View> {
     (
         any::<prop::sample::Index>(),
         unit(),
+        -1i8..=1,
+        -9.0f64..=-1.0,
         -5.5f64..=6.0,
         prop::sample::select(vec![
             Facing::Random,
@@ -159,14 +203,18 @@ fn view() -> impl Strategy<Value = View> {
         unit(),
         -1.0f64..=1.0,
     )
-        .prop_map(|(node, direction, distance_exp, facing, other, t)| View {
-            node,
-            direction,
-            distance_exp,
-            facing,
-            other,
-            t,
-        })
+        .prop_map(
+            |(node, direction, along, aim, distance_exp, facing, other, t)| View {
+                node,
+                direction,
+                along,
+                aim,
+                distance_exp,
+                facing,
+                other,
+                t,
+            },
+        )
 }
 
 /// The normal for `view` with unit axis `uh` and `sigma = R / D`.
@@ -182,7 +230,15 @@ fn normal(view: &View, uh: DVec3, sigma: f64) -> DVec3 {
     let n = match view.facing {
         Facing::Random => view.other,
         Facing::Towards => (uh + perp * (0.3 * view.t)).normalize(),
-        Facing::Grazing => (perp + uh * (1e-3 * view.t)).normalize(),
+        // n . uh from 0 (exactly, when t = 0) through 1e-17 to 1e-3.
+        Facing::Grazing => {
+            let c = if view.t.abs() < 0.05 {
+                0.0
+            } else {
+                view.t.signum() * 10f64.powf(-3.0 - 14.0 * (1.0 - view.t.abs()))
+            };
+            perp + uh * c
+        }
         Facing::Straddling => {
             let c = sigma * view.t;
             uh * c + perp * (1.0 - c * c).max(0.0).sqrt()
@@ -208,7 +264,18 @@ fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<boo
     let c = node.centroid().as_dvec3();
     let r = f64::from(node.radius()).max(1e-3 * c.abs().max_element().max(1e-6));
     let d = r * (1.0 + 10f64.powf(view.distance_exp));
-    let point = (c + view.direction * d).as_vec3();
+    let direction = if view.along == 0 {
+        view.direction
+    } else {
+        let farthest = tree.lights()[node.lights()]
+            .iter()
+            .map(|l| l.position.as_dvec3() - c)
+            .max_by(|a, b| a.length_squared().total_cmp(&b.length_squared()))
+            .unwrap();
+        let line = farthest.try_normalize().unwrap_or(view.direction);
+        (line * f64::from(view.along) + view.direction * 10f64.powf(view.aim)).normalize()
+    };
+    let point = (c + direction * d).as_vec3();
     let Some(cone) = Cone::new(point.as_dvec3(), node) else {
         return Ok(false);
     };
@@ -355,4 +422,55 @@ fn legendre_derivative(m: usize, x: f64) -> f64 {
         .step_by(2)
         .map(|j| (2 * j + 1) as f64 * legendre(j, x))
         .sum()
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    /// A light pair on a line through the point, offset across it along the
+    /// normal, at grazing incidence with both lights just above the tangent
+    /// plane: every degree of the series is positive and near its bound
+    /// through the box's reach across the axis (`hperp`), so this is where
+    /// that bound and its tail are tight.
+    #[test]
+    fn node_bound_contains_exact_sum_along_a_grazing_pair(
+        sigma in 0.05f64..=0.995,
+        far_weight in 1e-3f32..=0.5,
+        offset_exp in -4.0f64..=-1.0,
+        lift in 1.0f64..=4.0,
+        scale_exp in -2.0f64..=3.0,
+    ) {
+        let scale = 10f64.powf(scale_exp);
+        let (f, h) = (f64::from(far_weight), 10f64.powf(offset_exp));
+        // Far light at (1, 0, h), near one at -(f / (1 - f)) times that, so
+        // the weighted centroid is the origin.
+        let far = DVec3::new(1.0, 0.0, h) * scale;
+        let near = -far * (f / (1.0 - f));
+        let lights = [
+            PointLight::new(far.as_vec3(), Vec3::splat(far_weight)),
+            PointLight::new(near.as_vec3(), Vec3::splat(1.0 - far_weight)),
+        ];
+        let tree = LightTree::build(&lights).unwrap();
+        let node = &tree.nodes()[0];
+        let c = node.centroid().as_dvec3();
+        let d = f64::from(node.radius()) / sigma;
+        let point = (c + DVec3::X * d).as_vec3();
+        let Some(cone) = Cone::new(point.as_dvec3(), node) else {
+            return Ok(());
+        };
+        // n . uh = lift * (the near light's height below the centroid) / D.
+        let c0 = lift * (c.z - near.z).abs() / d;
+        let normal = (DVec3::Z + cone.axis * c0).normalize();
+        let surface = Surface { point: point.as_dvec3(), normal, view: DVec3::ZERO };
+        let shader = Lambert::new(Vec3::ONE);
+        let bound = shader.bound(&(), &surface, node, &cone);
+        let exact = exact(&shader, &surface, &tree, 0);
+        for k in 0..3 {
+            let allowance = ROUNDING_ALLOWANCE * exact[k];
+            prop_assert!(
+                bound.lower[k] <= exact[k] + allowance && exact[k] <= bound.upper[k] + allowance,
+                "exact {:e} outside [{:e}, {:e}]", exact[k], bound.lower[k], bound.upper[k]
+            );
+        }
+    }
 }
