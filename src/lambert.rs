@@ -116,21 +116,21 @@ impl BoundKind {
 ///
 /// **Multipole series** ([`BoundKind::Series`], the default). Notation:
 /// `y = x - c`, `u = c - p`, `uh = u / D`, `sigma = R / D < 1`,
-/// `s = |y| / D <= sigma`, `x = -uh . y^` (the cosine between `y` and `-uh`),
+/// `s = |y| / D <= sigma`, `t = -uh . y^` (the cosine between `y` and `-uh`),
 /// `c0 = n . uh`, `nperp = n - c0 uh`, `nu = |nperp|`, `P_m` the Legendre
 /// polynomials, and per channel `k` the node's intensity `I_k`, first moment
 /// `o_k` ([`Node::channel_offsets`]) and second moment matrix `S_k`
 /// ([`Node::channel_covariances`]).
 ///
 /// *Expansion.* `g(u + y) = -n . grad_y (1 / |u + y|)` (a dipole), and
-/// `1 / |u + y| = sum_l |y|^l P_l(x) / D^(l+1)` for `|y| < D` (the generating
+/// `1 / |u + y| = sum_l |y|^l P_l(t) / D^(l+1)` for `|y| < D` (the generating
 /// function of the Legendre polynomials). Differentiating term by term with
-/// `grad_y (r^l P_l(x)) = -r^(l-1) [P_(l-1)'(x) y^ + P_l'(x) uh]` (from
-/// `l P_l - x P_l' = -P_(l-1)'`) and then `P_(m+1)' - x P_m' = (m+1) P_m`:
+/// `grad_y (r^l P_l(t)) = -r^(l-1) [P_(l-1)'(t) y^ + P_l'(t) uh]` (from
+/// `l P_l - t P_l' = -P_(l-1)'`) and then `P_(m+1)' - t P_m' = (m+1) P_m`:
 ///
 /// ```text
 /// g(u + y) = D^-2 sum_(m>=0) a_m(y),
-/// a_m(y) = s^m [c0 (m+1) P_m(x) + (nperp . y^) P_m'(x)],
+/// a_m(y) = s^m [c0 (m+1) P_m(t) + (nperp . y^) P_m'(t)],
 /// ```
 ///
 /// absolutely convergent for `s < 1`; `D^-2 a_m` is the degree-`m` Taylor
@@ -145,12 +145,14 @@ impl BoundKind {
 ///
 /// is the exact sum of the first three terms over the members.
 ///
-/// *Degrees 3 to 5: harmonic norms.* On the unit sphere `a_m` is a spherical
-/// harmonic `Y` of degree `m`; expand it in the `2m + 1` Schmidt
+/// *Degrees 3 to 5: harmonic norms.* Write
+/// `nperp . y^ = nu sqrt(1 - t^2) cos phi` (`phi` the azimuth of `y^` about
+/// `uh`, from `nperp`). On the unit sphere `a_m` is a spherical harmonic `Y`
+/// of degree `m`; expand it in the `2m + 1` Schmidt
 /// semi-normalised real harmonics, `Y = sum_j beta_j R_mj`. Their mean
 /// squares over the sphere are `1 / (2m + 1)`, so
 /// `|beta|^2 = (2m + 1) mean(Y^2)`, and from `mean(P_m^2) = 1 / (2m + 1)`,
-/// `mean((1 - x^2) P_m'^2 cos^2 phi) = m (m+1) / (2 (2m + 1))` and a cross
+/// `mean((1 - t^2) P_m'^2 cos^2 phi) = m (m+1) / (2 (2m + 1))` and a cross
 /// term odd in `cos phi`:
 /// `|beta|^2 = c0^2 (m+1)^2 + nu^2 m (m+1) / 2 =: A_m^2`. With the node's
 /// moments `C_j = sum_i I_ik |y_i|^m R_mj(y^_i)`, whose norm is
@@ -161,7 +163,7 @@ impl BoundKind {
 /// ```
 ///
 /// This captures the cancellation between members that pointwise bounds
-/// miss. The zonal part alone (`Y = P_m(x)`, `|beta| = 1` by the addition
+/// miss. The zonal part alone (`Y = P_m(t)`, `|beta| = 1` by the addition
 /// theorem) gives `|c0| (m+1) sigma^m q_mk` for the `c0` term, and the
 /// `nperp` term is bounded pointwise with `|P_m'| <= m (m+1) / 2` and
 /// `|nperp . y| <= hperp`, the largest `|nperp . (x - c)|` over the node's box:
@@ -178,10 +180,12 @@ impl BoundKind {
 /// `A_m <= m + 1` and `sigma^m q_mk <= mu_m`.)
 ///
 /// *Tail from degree 6.* Sonin's inequality
-/// `m (m+1) P_m^2 + (1 - x^2) P_m'^2 <= m (m+1)` (the function has
-/// derivative `2 x P_m'^2 / (m (m+1))` after dividing by `m (m+1)`, so it is
-/// largest at `x = +-1`, where it is 1) and Cauchy-Schwarz on
-/// `c0 (m+1) P_m + nu sqrt(1 - x^2) P_m' cos phi` give `|a_m| <= (m+1) s^m`.
+/// `m (m+1) P_m^2 + (1 - t^2) P_m'^2 <= m (m+1)` (by Legendre's equation
+/// `F = P_m^2 + (1 - t^2) P_m'^2 / (m (m+1))` has `F' = 2 t P_m'^2 / (m (m+1))`,
+/// so `F` is largest at `t = +-1`, where it is 1) and Cauchy-Schwarz on
+/// `a_m / s^m = c0 (m+1) P_m + nu sqrt(1 - t^2) P_m' cos phi`, pairing
+/// `(c0 sqrt((m+1)/m), nu cos phi)` with `(sqrt(m (m+1)) P_m, sqrt(1 - t^2) P_m')`,
+/// give `|a_m| <= (m+1) s^m`.
 /// With `mu_m <= sigma^(m-6) mu_6` the tail closes:
 /// `sum_(m>=6) (m+1) mu_m <= mu_6 G1`, `G1 = 7 / (1 - sigma) + sigma / (1 - sigma)^2`.
 /// The `hperp` form gives `|c0| mu_6 G1 + (hperp / D) mu_5 G2` with
@@ -229,7 +233,7 @@ impl BoundKind {
 /// error are too.
 ///
 /// # Rounding
-/// Cosine bounds are widened by [`COS_SLACK`](crate::COS_SLACK). The series
+/// Cosine bounds are widened by [`COS_SLACK`]. The series
 /// bound widens its estimate by [`SERIES_SLACK`] of its terms' magnitudes,
 /// by [`POINT_SLACK`] for the offset `c - p`, by
 /// `f32::EPSILON (|o_k|_1 / D + 33 tr(S_k) / D^2)` for the `f32` storage of

@@ -69,8 +69,9 @@
 //!
 //! per channel `k`, provided the host's visibility classification is
 //! conservative ([`Visibility`]). Every node bound rounds its absolute
-//! errors outward ([`COS_SLACK`], [`lambert::SECOND_ORDER_SLACK`], upward
-//! rounding of stored radii and moments), and the cut folds its own `f64`
+//! errors outward ([`COS_SLACK`], [`lambert::SERIES_SLACK`],
+//! [`lambert::POINT_SLACK`], [`lambert::SECOND_ORDER_SLACK`], upward
+//! rounding of stored radii, moments and harmonic norms), and the cut folds its own `f64`
 //! summation error into the bound; [`ROUNDING_ALLOWANCE`] covers what is
 //! left, the relative rounding of single terms and of the reference sum.
 //! When a budget stops the cut before a node whose ball contains the shading
