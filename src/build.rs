@@ -261,8 +261,8 @@ pub(crate) fn round_up_f32(x: f64) -> f32 {
 /// recursive `f64` sum of `n` terms; by Minkowski's inequality and
 /// `sum_j R_lj(y)^2 = |y|^(2l)` the vector of summation errors has norm at
 /// most `(n - 1) 2^-53 P I_k`, `P = sum_i I_ik |y_i / R|^l / I_k <= 1`. Each
-/// term is evaluated by [`solid_harmonics`] with at most 40 roundings on
-/// intermediate values of at most `36 |y|^l` after normalisation, plus the
+/// term is evaluated by [`solid_harmonics`] with at most 20 roundings on
+/// intermediate values of at most `20 |y|^l` after normalisation, plus the
 /// scaling `y / R` (two roundings, moving a harmonic by at most `2^9 eps |y|^l`):
 /// within `2^11 eps |y|^l` each, `2^13 eps P I_k` for the vector of `2l + 1 <= 11`.
 /// So the computed `q` is within `(n + 2^13) eps` of the exact one, up to a
@@ -320,42 +320,66 @@ pub(crate) const HARMONIC_NORM_SQ: [f64; HARMONIC_COUNT] = {
 /// addition theorem reads `sum_j R_lj(a) R_lj(b) = |a|^l |b|^l P_l(a^ . b^)`;
 /// the sum of squares of one degree is `|y|^(2l)`.
 ///
-/// Evaluated as `(x + i y)^m T_lm(z, r^2)` with `T_mm = (2m - 1)!!`,
-/// `T_(m+1)m = (2m + 1) z T_mm` and
-/// `(l - m) T_lm = (2l - 1) z T_(l-1)m - (l + m - 1) r^2 T_(l-2)m`, the
-/// associated Legendre recurrence multiplied by `r^l` (no Condon-Shortley
-/// phase; signs cancel in every product the crate forms).
+/// Evaluated as `(x + i y)^m T_lm(z, r^2)` with
+/// `T_lm = r^(l-m) P_l^(m)(z / r)`, the `m`-th derivative of the Legendre
+/// polynomial made homogeneous (no Condon-Shortley phase; signs cancel in
+/// every product the crate forms).
 #[inline]
 pub(crate) fn solid_harmonics(y: DVec3) -> [f64; HARMONIC_COUNT] {
-    const DOUBLE_FACTORIAL: [f64; 6] = [1.0, 1.0, 3.0, 15.0, 105.0, 945.0];
-    const INVERSE: [f64; 6] = [0.0, 1.0, 0.5, 1.0 / 3.0, 0.25, 0.2];
+    let (x, yy, z) = (y.x, y.y, y.z);
     let r2 = y.length_squared();
-    let mut out = [0.0; HARMONIC_COUNT];
-    // (x + i y)^m, starting at m = 0.
-    let (mut re, mut im) = (1.0f64, 0.0f64);
-    for m in 0..=5usize {
-        // T_lm for l = m..=5.
-        let mut t = [0.0f64; 6];
-        t[m] = DOUBLE_FACTORIAL[m];
-        if m < 5 {
-            t[m + 1] = (2 * m + 1) as f64 * y.z * t[m];
-        }
-        for l in m + 2..=5 {
-            t[l] = ((2 * l - 1) as f64 * y.z * t[l - 1] - (l + m - 1) as f64 * r2 * t[l - 2])
-                * INVERSE[l - m];
-        }
-        for (l, &t_lm) in t.iter().enumerate().skip(m.max(3)) {
-            let base = harmonic_offset(l);
-            if m == 0 {
-                out[base] = t_lm;
-            } else {
-                out[base + 2 * m - 1] = t_lm * re;
-                out[base + 2 * m] = t_lm * im;
-            }
-        }
-        (re, im) = (re * y.x - im * y.y, re * y.y + im * y.x);
-    }
-    out
+    let (z2, r4) = (z * z, r2 * r2);
+    let z3 = z2 * z;
+    // (x + i y)^m = c_m + i s_m.
+    let (c1, s1) = (x, yy);
+    let (c2, s2) = (c1 * x - s1 * yy, c1 * yy + s1 * x);
+    let (c3, s3) = (c2 * x - s2 * yy, c2 * yy + s2 * x);
+    let (c4, s4) = (c3 * x - s3 * yy, c3 * yy + s3 * x);
+    let (c5, s5) = (c4 * x - s4 * yy, c4 * yy + s4 * x);
+    let t30 = 0.5 * (5.0 * z3 - 3.0 * z * r2);
+    let t31 = 0.5 * (15.0 * z2 - 3.0 * r2);
+    let t32 = 15.0 * z;
+    let t33 = 15.0;
+    let t40 = 0.125 * (35.0 * z2 * z2 - 30.0 * z2 * r2 + 3.0 * r4);
+    let t41 = 0.5 * (35.0 * z3 - 15.0 * z * r2);
+    let t42 = 0.5 * (105.0 * z2 - 15.0 * r2);
+    let t43 = 105.0 * z;
+    let t44 = 105.0;
+    let t50 = 0.125 * (63.0 * z3 * z2 - 70.0 * z3 * r2 + 15.0 * z * r4);
+    let t51 = 0.125 * (315.0 * z2 * z2 - 210.0 * z2 * r2 + 15.0 * r4);
+    let t52 = 0.5 * (315.0 * z3 - 105.0 * z * r2);
+    let t53 = 0.5 * (945.0 * z2 - 105.0 * r2);
+    let t54 = 945.0 * z;
+    let t55 = 945.0;
+    [
+        t30,
+        t31 * c1,
+        t31 * s1,
+        t32 * c2,
+        t32 * s2,
+        t33 * c3,
+        t33 * s3,
+        t40,
+        t41 * c1,
+        t41 * s1,
+        t42 * c2,
+        t42 * s2,
+        t43 * c3,
+        t43 * s3,
+        t44 * c4,
+        t44 * s4,
+        t50,
+        t51 * c1,
+        t51 * s1,
+        t52 * c2,
+        t52 * s2,
+        t53 * c3,
+        t53 * s3,
+        t54 * c4,
+        t54 * s4,
+        t55 * c5,
+        t55 * s5,
+    ]
 }
 
 /// Harmonic norms of degrees 3 to 5 per channel (rounded upward, see
