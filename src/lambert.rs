@@ -4,7 +4,7 @@ use glam::{DVec3, Vec3};
 
 use crate::ShadeError;
 use crate::geometry::{Cone, Surface};
-use crate::numeric::{SECOND_ORDER_SLACK, dot_of_difference};
+use crate::numeric::{COS_SLACK, POINT_SLACK, SECOND_ORDER_SLACK, SERIES_SLACK, dot_of_difference};
 use crate::shader::{NodeEstimate, Shader, ViewIndependent, colour_or_clamped, try_colour};
 use crate::tree::Node;
 
@@ -15,11 +15,22 @@ pub enum BoundKind {
     /// The paper's bound: the interval of the shading term over the node's
     /// ball, around the virtual light's value.
     Paper,
-    /// The tightest certified bound the shader has (for [`Lambert`]: the
-    /// paper's interval intersected with the second-order Taylor interval,
-    /// with the first-order colour correction in the estimate).
+    /// The second-order Taylor bound: first-order colour correction in the
+    /// estimate, Hessian bounds over the ball for the remainder, and the box
+    /// refinements (the crate's default up to 0.1's development).
+    Taylor,
+    /// The dipole multipole series: the estimate sums the expansion through
+    /// second order from per-channel moments, the remainder is bounded degree
+    /// by degree from harmonic norms, with the box refinements.
     #[default]
-    Tight,
+    Series,
+}
+
+#[allow(non_upper_case_globals)]
+impl BoundKind {
+    /// The tightest bound the crate ships, currently
+    /// [`BoundKind::Series`].
+    pub const Tight: Self = Self::Series;
 }
 
 /// Diffuse reflection: a light of intensity `I` at distance `d` in direction
@@ -29,10 +40,12 @@ pub enum BoundKind {
 /// # Node bound
 /// For a node of intensity `I`, centroid `c`, radius `R`, seen at distance
 /// `D = |c - p| > R` (a [`Cone`] with half-angle `delta`, `sin delta = R/D`,
-/// and angle `theta_c` between `n` and the axis):
+/// and angle `theta_c` between `n` and the axis), three bounds are available
+/// ([`BoundKind`]). All hold per channel `k`, whenever the cone exists
+/// (`D - R > D * MIN_CLEARANCE`, see [`Cone::new`]), for any unit normal,
+/// including nodes that straddle the tangent plane.
 ///
-/// **Paper's bound** (slides "Diffuse Reflection Error Bound"), valid
-/// whenever `D > R`:
+/// **Paper's bound** (slides "Diffuse Reflection Error Bound"):
 ///
 /// ```text
 /// I kd max(0, cos(theta_c + delta)) / (D + R)^2
@@ -43,9 +56,108 @@ pub enum BoundKind {
 /// `acos`). The estimate is the virtual light, `I kd max(0, cos theta_c) / D^2`.
 /// A ball wholly below the tangent plane contributes exactly 0.
 ///
-/// **Second-order bound** (used by [`BoundKind::Tight`], the default), valid
-/// whenever `D > R`. The shading term is `f = max(0, g)` with
-/// `g(x) = n.(x - p) / |x - p|^3`, smooth away from `p`. Taylor's theorem
+/// **Box refinements** (with [`BoundKind::Taylor`] and [`BoundKind::Series`]),
+/// from the node's tight box ([`Node::aabb`]) with `z_lo`, `z_hi` the lowest
+/// and highest `n.(x - p)` over it: if `z_hi <= 0` every member is at or
+/// below the tangent plane and the node is exactly 0; always
+/// `exact <= I kd z_hi / (D - R)^3` (as `cos/d^2 = z/d^3`). Both refined
+/// bounds work with the smooth `g(x) = n.(x - p) / |x - p|^3` and account
+/// for the clamp `f = max(0, g)` separately: `f - g` is non-zero only below
+/// the tangent plane, where `0 <= f - g = -z/d^3 <= depth / (D - R)^3`, with
+/// `depth = max(0, min(R - n.(c - p), -z_lo))` how far the members reach
+/// below the plane. So if `sum_i I_ik g(x_i)` lies in `[A, B]`, the exact
+/// value lies in `kd_k [A, B + I_k depth / (D - R)^3]`; the extra term
+/// vanishes when the box lies above the plane, which keeps the bound
+/// continuous in `p` as a node crosses it. Each refined interval is
+/// intersected with the paper's and the box's.
+///
+/// **Multipole series** ([`BoundKind::Series`], the default). Notation:
+/// `y = x - c`, `u = c - p`, `uh = u / D`, `sigma = R / D < 1`,
+/// `s = |y| / D <= sigma`, `t = -uh . y^` (the cosine between `y` and `-uh`),
+/// `c0 = n . uh`, `nperp = n - c0 uh`, `nu = |nperp|`, `P_m` the Legendre
+/// polynomials, and per channel `k` the node's intensity `I_k`, first moment
+/// `o_k` ([`Node::channel_offsets`]) and second moment matrix `S_k`
+/// ([`Node::channel_covariances`]).
+///
+/// *Expansion.* `g(u + y) = -n . grad_y (1 / |u + y|)` (a dipole), and
+/// `1 / |u + y| = sum_l |y|^l P_l(t) / D^(l+1)` for `|y| < D` (the generating
+/// function of the Legendre polynomials). Differentiating term by term with
+/// `grad_y (r^l P_l(t)) = -r^(l-1) [P_(l-1)'(t) y^ + P_l'(t) uh]` (from
+/// `l P_l - t P_l' = -P_(l-1)'`) and then `P_(m+1)' - t P_m' = (m+1) P_m`:
+///
+/// ```text
+/// g(u + y) = D^-2 sum_(m>=0) a_m(y),
+/// a_m(y) = s^m [c0 (m+1) P_m(t) + (nperp . y^) P_m'(t)],
+/// ```
+///
+/// absolutely convergent for `s < 1`; `D^-2 a_m` is the degree-`m` Taylor
+/// term of `g` about `c`, a homogeneous harmonic polynomial of degree `m` in
+/// `y`. Degrees 0 to 2 written out (`sum_i I_ik y_i = I_k o_k`,
+/// `sum_i I_ik y_i y_i^T = I_k S_k`):
+///
+/// ```text
+/// E_k = I_k / D^2 [c0 + (n.o_k - 3 c0 uh.o_k) / D
+///                  + (15 c0 uh.S_k.uh - 3 c0 tr S_k - 6 uh.S_k.n) / (2 D^2)]
+/// ```
+///
+/// is the exact sum of the first three terms over the members.
+///
+/// *Degrees 3 to 5: harmonic norms.* Write
+/// `nperp . y^ = nu sqrt(1 - t^2) cos phi` (`phi` the azimuth of `y^` about
+/// `uh`, from `nperp`). On the unit sphere `a_m` is a spherical harmonic `Y`
+/// of degree `m`; expand it in the `2m + 1` Schmidt
+/// semi-normalised real harmonics, `Y = sum_j beta_j R_mj`. Their mean
+/// squares over the sphere are `1 / (2m + 1)`, so
+/// `|beta|^2 = (2m + 1) mean(Y^2)`, and from `mean(P_m^2) = 1 / (2m + 1)`,
+/// `mean((1 - t^2) P_m'^2 cos^2 phi) = m (m+1) / (2 (2m + 1))` and a cross
+/// term odd in `cos phi`:
+/// `|beta|^2 = c0^2 (m+1)^2 + nu^2 m (m+1) / 2 =: A_m^2`. With the node's
+/// moments `C_j = sum_i I_ik |y_i|^m R_mj(y^_i)`, whose norm is
+/// `|C| = q_mk I_k R^m` ([`Node::harmonic_norms`]), Cauchy-Schwarz gives
+///
+/// ```text
+/// |sum_i I_ik a_m(y_i)| = D^-m |beta . C| <= I_k A_m sigma^m q_mk.
+/// ```
+///
+/// This captures the cancellation between members that pointwise bounds
+/// miss. The zonal part alone (`Y = P_m(t)`, `|beta| = 1` by the addition
+/// theorem) gives `|c0| (m+1) sigma^m q_mk` for the `c0` term, and the
+/// `nperp` term is bounded pointwise with `|P_m'| <= m (m+1) / 2` and
+/// `|nperp . y| <= hperp`, the largest `|nperp . (x - c)|` over the node's box:
+///
+/// ```text
+/// |sum_i I_ik a_m(y_i)| <= I_k [|c0| (m+1) sigma^m q_mk + (hperp / D) m (m+1) / 2 mu_(m-1)],
+/// ```
+///
+/// with `mu_j = sum_i I_ik s_i^j / I_k <= sigma^(j-2) mu_2`,
+/// `mu_2 = tr(S_k) / D^2`. At grazing angles (`c0` small) over flat clusters
+/// (`hperp` small) this second form is far smaller. Each degree takes the
+/// smaller. (The classical pointwise bound, `|a_m| <= s^m (m+1)` from
+/// Sonin's inequality, is never smaller than the first form, since
+/// `A_m <= m + 1` and `sigma^m q_mk <= mu_m`.)
+///
+/// *Tail from degree 6.* Sonin's inequality
+/// `m (m+1) P_m^2 + (1 - t^2) P_m'^2 <= m (m+1)` (by Legendre's equation
+/// `F = P_m^2 + (1 - t^2) P_m'^2 / (m (m+1))` has `F' = 2 t P_m'^2 / (m (m+1))`,
+/// so `F` is largest at `t = +-1`, where it is 1) and Cauchy-Schwarz on
+/// `a_m / s^m = c0 (m+1) P_m + nu sqrt(1 - t^2) P_m' cos phi`, pairing
+/// `(c0 sqrt((m+1)/m), nu cos phi)` with `(sqrt(m (m+1)) P_m, sqrt(1 - t^2) P_m')`,
+/// give `|a_m| <= (m+1) s^m`.
+/// With `mu_m <= sigma^(m-6) mu_6` the tail closes:
+/// `sum_(m>=6) (m+1) mu_m <= mu_6 G1`, `G1 = 7 / (1 - sigma) + sigma / (1 - sigma)^2`.
+/// The `hperp` form gives `|c0| mu_6 G1 + (hperp / D) mu_5 G2` with
+/// `G2 = sum_(j>=0) (6+j)(7+j)/2 sigma^j
+///     = [42 / (1 - sigma) + 13 sigma / (1 - sigma)^2 + sigma (1 + sigma) / (1 - sigma)^3] / 2`;
+/// the smaller is used.
+///
+/// *Interval.* With `rho_k` the sum of the degree 3 to 5 bounds and the tail
+/// (times `I_k / D^2`), `sum_i I_ik g(x_i)` lies in `[E_k - rho_k, E_k + rho_k]`,
+/// which the clamp term above widens upward; intersected with the paper's
+/// interval and the box's, times `kd_k`. The estimate is the final
+/// interval's midpoint, which minimises the certified error
+/// `max(estimate - lower, upper - estimate)`.
+///
+/// **Second-order Taylor bound** ([`BoundKind::Taylor`]). Taylor's theorem
 /// for `g` about `c` gives, per channel `k`,
 ///
 /// ```text
@@ -53,24 +165,14 @@ pub enum BoundKind {
 /// |rem_i| <= 1/2 sum_jl sup|H_jl| |x_ij - c_j| |x_il - c_l|
 /// ```
 ///
-/// and `0 <= f - g <= max(0, R - n.(c - p)) / (D - R)^3` on the ball (the
-/// difference is non-zero only below the tangent plane). So the exact value
-/// lies in `kd_k [T_k - rem_k, T_k + rem_k + I_k max(0, R - n.(c-p))/(D - R)^3]`
-/// with `T_k` the Taylor sum; the extra term vanishes when the ball lies
-/// above the plane, which keeps the bound continuous in `p` as a node crosses
-/// it.
-///
-/// where `o_k` is the node's per-channel first moment
-/// ([`Node::channel_offsets`]; it vanishes for members of one colour because
-/// the centroid is weight-averaged) and `H` the Hessian of `f` over the ball.
-/// The estimate includes the first-order term, so the error is second order.
-/// Because `I_ik <= w_i` (the weight is the largest channel) and by
-/// Cauchy-Schwarz, `sum_i I_ik |x_ij - c_j||x_il - c_l| <= W sqrt(S_jj S_ll)`
-/// with `S` the node's [`covariance`](Node::covariance) expressed in a frame
-/// `e1` (horizontal, towards `c`), `e2` (horizontal), `e3 = n`. In units of
-/// `D` (`rho = 1 - R/D`, `z+ = |cos theta_c| + R/D`, `a+ = sin theta_c + R/D`,
-/// `b+ = R/D`, `t_a = min(1, (a+/rho)^2)`, likewise `t_b`, `t_z`,
-/// `q = z+/rho^5`) the Hessian entries are bounded over the ball by
+/// with `H` the Hessian of `g` over the ball. The estimate includes the
+/// first-order term, so the error is second order. By Cauchy-Schwarz,
+/// `sum_i I_ik |x_ij - c_j||x_il - c_l| <= I_k sqrt(S_k,jj S_k,ll)` with
+/// `S_k` expressed in a frame `e1` (horizontal, towards `c`), `e2`
+/// (horizontal), `e3 = n`. In units of `D` (`rho = 1 - R/D`,
+/// `z+ = |cos theta_c| + R/D`, `a+ = sin theta_c + R/D`, `b+ = R/D`,
+/// `t_a = min(1, (a+/rho)^2)`, likewise `t_b`, `t_z`, `q = z+/rho^5`) the
+/// Hessian entries are bounded over the ball by
 ///
 /// ```text
 /// |H11| <= q max(3, 15 t_a - 3)     |H12| <= 15 q min(sqrt(t_a t_b), 1/2)
@@ -80,26 +182,31 @@ pub enum BoundKind {
 ///
 /// and, isotropically, `||H|| <= 6 / rho^4` (the spectral norm of the Hessian
 /// of `z/r^3` at unit distance is at most 6, reached along the normal). The
-/// remainder uses the smaller of the per-axis and the isotropic sums. At
-/// grazing angles the per-axis one is far tighter: the horizontal entries are
-/// `O(z/r^5)`. The final interval is the intersection of the paper's and the
-/// second-order one; the estimate, the Taylor sum plus half the
-/// below-the-plane term, is clamped into it. Every piece is continuous in
-/// `p`, so the node's estimate and error are too.
+/// remainder uses the smaller of the per-axis and the isotropic sums. The
+/// estimate, the Taylor sum plus half the clamp term, is clamped into the
+/// final interval.
 ///
-/// **Box refinements** (also [`BoundKind::Tight`]), from the node's tight box
-/// ([`Node::aabb`]) with `z_lo`, `z_hi` the lowest and highest `n.(x - p)`
-/// over it: if `z_hi <= 0` every member is at or below the tangent plane and
-/// the node is exactly 0; always `exact <= I kd z_hi / (D - R)^3` (as
-/// `cos/d^2 = z/d^3`); and the below-the-plane term above uses
-/// `min(R - n.(c - p), -z_lo)`. The box is far tighter than the ball for flat
-/// clusters such as street lamps seen from a roof.
+/// Every piece of every bound is continuous in `p`, so a node's estimate and
+/// error are too.
 ///
-/// Rounding: cosine bounds are widened by [`COS_SLACK`](crate::numeric::COS_SLACK); the second-order
-/// estimate by [`SECOND_ORDER_SLACK`] of its terms' magnitudes and by
-/// `f32::EPSILON` of the first-order term for the `f32` storage of the offsets;
-/// the quadratic forms of `S` by `f32::EPSILON * trace(S)` for the storage of
-/// its off-diagonal entries (its diagonal is rounded upward when stored).
+/// # Rounding
+/// Cosine bounds are widened by [`COS_SLACK`]. The series
+/// bound widens its estimate by [`SERIES_SLACK`] of its terms' magnitudes,
+/// by [`POINT_SLACK`] for the offset `c - p`, by
+/// `f32::EPSILON (|o_k|_1 / D + 33 tr(S_k) / D^2)` for the `f32` storage of
+/// the moments (offsets rounded to nearest move the degree-1 term by at most
+/// `|grad| |o|_1 f32::EPSILON / 2 / D`, `|grad| <= 2`; the stored entries of
+/// `S_k` are within `f32::EPSILON tr(S_k)` of the `f64` ones, moving each
+/// quadratic form by at most `3 f32::EPSILON tr(S_k)`, and the degree-2 term
+/// by `(15 * 3 + 3 + 6 * 3) / 2 = 33` of those), and by
+/// `n f64::EPSILON (sigma + 18 sigma^2)` for the build's `f64` sums of the
+/// `n` members' moments (each entry within `n 2^-53 I_k R^j` of exact);
+/// its remainder by [`SERIES_SLACK`] as documented there. Stored diagonals
+/// of `S_k` and harmonic norms are rounded upward at build time, after an
+/// allowance for their `f64` sums. The Taylor bound widens its estimate by
+/// [`SECOND_ORDER_SLACK`] of its terms' magnitudes, by [`COS_SLACK`] times
+/// `I_k / D^2` for the cosine, and by `f32::EPSILON` of the first-order
+/// term; the quadratic forms of `S_k` by `f32::EPSILON * tr(S_k)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lambert {
     kd: DVec3,
@@ -116,7 +223,7 @@ impl Lambert {
     pub fn new(kd: Vec3) -> Self {
         Self {
             kd: colour_or_clamped(kd, "kd"),
-            kind: BoundKind::Tight,
+            kind: BoundKind::Series,
         }
     }
 
@@ -127,11 +234,11 @@ impl Lambert {
     pub fn try_new(kd: Vec3) -> Result<Self, ShadeError> {
         Ok(Self {
             kd: try_colour(kd, "kd must be finite and >= 0")?,
-            kind: BoundKind::Tight,
+            kind: BoundKind::Series,
         })
     }
 
-    /// Selects the node bound (default [`BoundKind::Tight`]).
+    /// Selects the node bound (default [`BoundKind::Series`]).
     #[must_use]
     pub const fn with_bound(mut self, kind: BoundKind) -> Self {
         self.kind = kind;
@@ -239,7 +346,72 @@ impl Shader for Lambert {
         // (highest z in the box) / (D - R)^3, much tighter than the paper's
         // for flat clusters barely above the plane.
         let upper = upper.min(scale * (highest * inv_d * inv_rho3));
+        // f = max(0, g) exceeds g only below the tangent plane, where
+        // 0 <= f - g = -z/r^3 <= depth / (D - R)^3, depth being how far the
+        // members reach below the plane: at most R - n.(c - p) (the ball) and
+        // at most the box's depth. Zero when the box lies above the plane,
+        // and continuous as a node crosses it. In units of 1/D^2.
+        let depth = (sd - z).min(-lowest * inv_d).max(0.0);
+        let straddle = depth * inv_rho3;
+        let geometry = Geometry {
+            z,
+            sin_c,
+            inv_rho,
+            straddle,
+        };
+        let (lo2, hi2, estimate) = if self.kind == BoundKind::Taylor {
+            self.taylor(surface, node, cone, &geometry, scale)
+        } else {
+            self.series(surface, node, cone, &geometry, scale)
+        };
+        let lo = lower.max(lo2);
+        let hi = upper.min(hi2);
+        if lo.cmpgt(hi).any() {
+            // Both intervals contain the exact value, so they overlap up to
+            // rounding; keep the paper's interval if they do not.
+            debug_assert!(
+                (lo - hi).max_element() <= 1e-9 * upper.max_element(),
+                "disjoint bounds: paper [{lower}, {upper}] second [{lo2}, {hi2}]"
+            );
+            return NodeEstimate::new(virtual_light, lower, upper);
+        }
+        match estimate {
+            Some(estimate) => NodeEstimate::new(estimate, lo, hi),
+            // The midpoint minimises the certified error.
+            None => NodeEstimate::new(0.5 * (lo + hi), lo, hi),
+        }
+    }
+}
 
+/// What both refined bounds share: the normal against the axis, the
+/// nearest distance, and the below-the-plane term.
+struct Geometry {
+    /// `n . uh`.
+    z: f64,
+    /// `|n x uh|`.
+    sin_c: f64,
+    /// `D / (D - R)`.
+    inv_rho: f64,
+    /// Bound on `sum (f - g) / I` in units of `1/D^2`.
+    straddle: f64,
+}
+
+impl Lambert {
+    /// The second-order Taylor interval `(lower, upper, estimate)`.
+    #[inline]
+    fn taylor(
+        &self,
+        surface: &Surface,
+        node: &Node,
+        cone: &Cone,
+        geo: &Geometry,
+        scale: DVec3,
+    ) -> (DVec3, DVec3, Option<DVec3>) {
+        let n = surface.normal;
+        let (z, sin_c, inv_rho) = (geo.z, geo.sin_c, geo.inv_rho);
+        let inv_d = cone.inv_distance;
+        let sd = cone.sin_half_angle;
+        let inv_rho3 = inv_rho * inv_rho * inv_rho;
         // Second order, in units of D. Gradient of z/r^3 at the unit axis.
         let grad = n - 3.0 * z * cone.axis;
         // Its Euclidean norm bounded by its 1-norm, for the rounding slack.
@@ -256,13 +428,7 @@ impl Shader for Lambert {
         let first_order = scale * offsets;
         // Taylor estimate of the smooth g = z/r^3 (not clamped at 0).
         let smooth = scale * z + first_order;
-        // f = max(0, g) exceeds g only below the tangent plane, where
-        // 0 <= f - g = -z/r^3 <= depth / (D - R)^3, depth being how far the
-        // members reach below the plane: at most R - n.(c - p) (the ball) and
-        // at most the box's depth. Zero when the box lies above the plane,
-        // and continuous as a node crosses it.
-        let depth = (sd - z).min(-lowest * inv_d).max(0.0);
-        let straddle = scale * (depth * inv_rho3);
+        let straddle = scale * geo.straddle;
 
         // Hessian entry bounds over the ball.
         // Ratios to the nearest distance, capped at 1: |a|/r, |b|/r, |z|/r.
@@ -288,39 +454,136 @@ impl Shader for Lambert {
             n.any_orthonormal_vector()
         };
         let e2 = n.cross(e1);
-        let cov = &node.covariance.map(f64::from);
         let inv_d2 = inv_d * inv_d;
-        let trace = node.mean_squared_radius() * inv_d2;
-        let pad = f32::EPSILON as f64 * trace;
-        let s11 = (quadratic_form(cov, e1) * inv_d2).max(0.0) + pad;
-        let s22 = (quadratic_form(cov, e2) * inv_d2).max(0.0) + pad;
-        let s33 = (quadratic_form(cov, n) * inv_d2).max(0.0) + pad;
-        let (d1, d2, d3) = (s11.sqrt(), s22.sqrt(), s33.sqrt());
-        let per_axis = 0.5
-            * (h11 * s11
-                + h22 * s22
-                + h33 * s33
-                + 2.0 * (h12 * d1 * d2 + h13 * d1 * d3 + h23 * d2 * d3));
-        let isotropic = 3.0 * p4 * trace;
-        let remainder_unit = per_axis.min(isotropic) * (1.0 + SECOND_ORDER_SLACK);
-        let remainder = self.kd * (node.weight * inv_d2 * remainder_unit);
+        let traces = node.mean_squared_radii() * inv_d2;
+        let mut remainder_unit = DVec3::ZERO;
+        for k in 0..3 {
+            let cov = &node.channel_covariances[k].map(f64::from);
+            let trace = traces[k];
+            let pad = f32::EPSILON as f64 * trace;
+            let s11 = (quadratic_form(cov, e1) * inv_d2).max(0.0) + pad;
+            let s22 = (quadratic_form(cov, e2) * inv_d2).max(0.0) + pad;
+            let s33 = (quadratic_form(cov, n) * inv_d2).max(0.0) + pad;
+            let (d1, d2, d3) = (s11.sqrt(), s22.sqrt(), s33.sqrt());
+            let per_axis = 0.5
+                * (h11 * s11
+                    + h22 * s22
+                    + h33 * s33
+                    + 2.0 * (h12 * d1 * d2 + h13 * d1 * d3 + h23 * d2 * d3));
+            let isotropic = 3.0 * p4 * trace;
+            remainder_unit[k] = per_axis.min(isotropic) * (1.0 + SECOND_ORDER_SLACK);
+        }
+        let remainder = scale * remainder_unit;
+        // The cosine z carries an absolute error (up to COS_SLACK) that a
+        // relative slack of |z| misses when z is near 0.
         let rounding = SECOND_ORDER_SLACK * (scale * z.abs() + first_order.abs() + straddle)
+            + COS_SLACK * scale
             + f32::EPSILON as f64 * scale * grad_len * offset_lens;
         let lo2 = smooth - remainder - rounding;
         let hi2 = smooth + remainder + straddle + rounding;
-        let estimate = smooth + 0.5 * straddle;
-        let lo = lower.max(lo2);
-        let hi = upper.min(hi2);
-        if lo.cmpgt(hi).any() {
-            // Both intervals contain the exact value, so they overlap up to
-            // rounding; keep the paper's interval if they do not.
-            debug_assert!(
-                (lo - hi).max_element() <= 1e-9 * upper.max_element(),
-                "disjoint bounds: paper [{lower}, {upper}] second order [{lo2}, {hi2}]"
-            );
-            return NodeEstimate::new(virtual_light, lower, upper);
+        (lo2, hi2, Some(smooth + 0.5 * straddle))
+    }
+
+    /// The multipole series interval `(lower, upper)` of the smooth sum,
+    /// widened upward by the clamp term; the estimate is the final
+    /// interval's midpoint.
+    #[inline]
+    fn series(
+        &self,
+        surface: &Surface,
+        node: &Node,
+        cone: &Cone,
+        geo: &Geometry,
+        scale: DVec3,
+    ) -> (DVec3, DVec3, Option<DVec3>) {
+        let n = surface.normal;
+        let uh = cone.axis;
+        let c0 = geo.z;
+        let inv_rho = geo.inv_rho;
+        let inv_d = cone.inv_distance;
+        let inv_d2 = inv_d * inv_d;
+        let sigma = cone.sin_half_angle;
+
+        // Degrees 0 to 2 per channel, in units of I_k / D^2:
+        // c0 + (n.o - 3 c0 uh.o) / D + (15 c0 uh.S.uh - 3 c0 tr S - 6 uh.S.n) / (2 D^2).
+        let grad = n - 3.0 * c0 * uh;
+        let o = node.channel_offsets.map(|v| v.as_dvec3());
+        let first = DVec3::new(grad.dot(o[0]), grad.dot(o[1]), grad.dot(o[2])) * inv_d;
+        let offset_lens = DVec3::new(
+            o[0].abs().element_sum(),
+            o[1].abs().element_sum(),
+            o[2].abs().element_sum(),
+        ) * inv_d;
+        // The degree-2 bracket is linear in S: one weight per stored entry
+        // [xx, yy, zz, xy, xz, yz], shared by the three channels.
+        let (a, b) = (15.0 * c0, 3.0 * c0);
+        let weights = [
+            a * uh.x * uh.x - b - 6.0 * uh.x * n.x,
+            a * uh.y * uh.y - b - 6.0 * uh.y * n.y,
+            a * uh.z * uh.z - b - 6.0 * uh.z * n.z,
+            2.0 * a * uh.x * uh.y - 6.0 * (uh.x * n.y + uh.y * n.x),
+            2.0 * a * uh.x * uh.z - 6.0 * (uh.x * n.z + uh.z * n.x),
+            2.0 * a * uh.y * uh.z - 6.0 * (uh.y * n.z + uh.z * n.y),
+        ];
+        let mut second = DVec3::ZERO;
+        let mut mu2 = DVec3::ZERO;
+        for k in 0..3 {
+            let s = &node.channel_covariances[k];
+            let mut form = 0.0;
+            for (entry, weight) in s.iter().zip(weights) {
+                form += f64::from(*entry) * weight;
+            }
+            second[k] = form;
+            mu2[k] = f64::from(s[0]) + f64::from(s[1]) + f64::from(s[2]);
         }
-        NodeEstimate::new(estimate, lo, hi)
+        let second = second * (0.5 * inv_d2);
+        let mu2 = mu2 * inv_d2;
+        let series = c0 + first + second;
+
+        // Remainder in units of I_k / D^2. The quantities it grows with,
+        // widened for their input rounding (see SERIES_SLACK).
+        let ac = c0.abs() + SERIES_SLACK;
+        let nu = geo.sin_c + SERIES_SLACK;
+        // hperp / D: the box's reach across the axis, from the box corners
+        // relative to c (each difference one rounding of a value <= R).
+        let nperp = n - c0 * uh;
+        let c = node.centroid.as_dvec3();
+        let (lo, hi) = (node.aabb.min.as_dvec3() - c, node.aabb.max.as_dvec3() - c);
+        let reach = nperp.dot(0.5 * (lo + hi)).abs() + nperp.abs().dot(0.5 * (hi - lo));
+        let hperp = (reach + SERIES_SLACK * cone.radius) * inv_d;
+        let (c2, nu2) = (ac * ac, nu * nu);
+        let mut remainder = DVec3::ZERO;
+        // mu_(m-1) <= sigma^(m-3) mu_2 and sigma^m, from m = 3.
+        let mut mu_prev = mu2;
+        let mut sigma_m = sigma * sigma * sigma;
+        for (d, q) in node.harmonic_norms.iter().enumerate() {
+            let m = (d + 3) as f64;
+            let q = q.as_dvec3() * sigma_m;
+            let harmonic = (c2 * (m + 1.0) * (m + 1.0) + nu2 * (0.5 * m * (m + 1.0))).sqrt();
+            let across = q * (ac * (m + 1.0)) + mu_prev * (hperp * 0.5 * m * (m + 1.0));
+            remainder += (q * harmonic).min(across);
+            mu_prev *= sigma;
+            sigma_m *= sigma;
+        }
+        // Tail from degree 6: mu_5 = mu_prev, mu_6 <= sigma mu_5.
+        let mu6 = mu_prev * sigma;
+        let g1 = 7.0 * inv_rho + sigma * inv_rho * inv_rho;
+        let g2 = 0.5 * inv_rho * (42.0 + inv_rho * sigma * (13.0 + (1.0 + sigma) * inv_rho));
+        let tail = mu6 * g1;
+        remainder += tail.min(tail * ac + mu_prev * (hperp * g2));
+
+        let remainder = remainder * (1.0 + SERIES_SLACK * inv_rho);
+        let sums = f64::from(node.light_count) * f64::EPSILON * sigma * (1.0 + 18.0 * sigma);
+        let slack = SERIES_SLACK * (1.0 + offset_lens + mu2)
+            + f32::EPSILON as f64 * (offset_lens + 33.0 * mu2)
+            + sums
+            + POINT_SLACK * inv_rho * inv_rho * inv_rho;
+        let width = remainder + slack;
+        (
+            scale * (series - width),
+            scale * (series + width + geo.straddle),
+            None,
+        )
     }
 }
 

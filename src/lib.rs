@@ -93,7 +93,7 @@
 //! real numbers), provided the host's visibility classification is
 //! conservative ([`Visibility`]). Every node bound rounds its absolute
 //! errors outward (the slacks of [`numeric`], upward rounding of stored
-//! radii and moments), and the cut folds its own `f64` summation error into
+//! radii, moments and harmonic norms), and the cut folds its own `f64` summation error into
 //! the bound; the allowance covers what is left, the relative rounding of
 //! single terms and of the reference sum.
 //!

@@ -31,11 +31,49 @@ use glam::DVec3;
 /// where a relative allowance would not help.
 pub const COS_SLACK: f64 = 16.0 * f64::EPSILON;
 
-/// Relative allowance for `f64` rounding in [`Lambert`](crate::Lambert)'s
-/// second-order estimate: it is a sum of a handful of products, each within
-/// a few ulps; the slack is applied to the magnitudes of its terms, so it
-/// stays valid when they cancel. `64 * f64::EPSILON` is about `1.4e-14`.
+/// Relative allowance for `f64` rounding in the second-order Taylor
+/// estimate ([`BoundKind::Taylor`](crate::BoundKind::Taylor)): it is a sum of a handful of products,
+/// each within a few ulps; the slack is applied to the magnitudes of its two
+/// terms, so it stays valid when they cancel. `64 * f64::EPSILON` is about
+/// `1.4e-14`.
 pub const SECOND_ORDER_SLACK: f64 = 64.0 * f64::EPSILON;
+
+/// Rounding allowance of the multipole series bound ([`BoundKind::Series`](crate::BoundKind::Series)),
+/// about `2.3e-13`. It is used three ways:
+///
+/// * absolutely, on the estimate, times the magnitude
+///   `1 + |o_k|_1 / D + tr(S_k) / D^2` (in units of `I_k / D^2`). The inputs
+///   `uh = (c - p) / D`, `c0 = n . uh`, `nu = |n x uh|` and
+///   `nperp = n - c0 uh` are within `10 * f64::EPSILON` (absolute) of the
+///   exact values for the computed offset `c - p` (`D` within 2 ulps, `uh`
+///   within 3 per component, a dot or cross product of unit vectors adding
+///   2). The three series terms are bounded by `1`, `2 |o|/D` and
+///   `12 tr(S)/D^2` (using `|e^T S f| <= tr S` for unit `e`, `f`), are
+///   computed with at most 10 roundings each, and move by at most
+///   `(1 + 10 |o|/D + 30 tr(S)/D^2)` times the input error (each occurrence
+///   of a unit vector contributes once). Together at most
+///   `10 eps (2 + 14 |o|/D + 42 tr(S)/D^2) <= 420 eps (1 + |o|/D + tr(S)/D^2)`;
+///   `1024 eps` leaves a factor 2.4.
+/// * absolutely, added to `|c0|`, `nu` and (times `R`) `hperp`, the
+///   quantities the remainder grows with, for the same input errors
+///   (`hperp`: `nperp` within `10 eps` moves `nperp . y` by at most
+///   `10 sqrt(3) eps R`);
+/// * relatively, on the remainder, times `D / (D - R)`: the remainder is a
+///   sum of products of non-negative factors (at most 20 roundings), and it
+///   grows with `sigma = R/D` (computed within 3 ulps) at most like
+///   `sigma^6 / (1 - sigma)^3`, whose relative sensitivity to `sigma` is
+///   `6 / sigma + 3 / (1 - sigma) <= 9 D / (D - R)` per unit of relative
+///   error; `20 + 3 * 9 * 3 < 1024`.
+pub const SERIES_SLACK: f64 = 1024.0 * f64::EPSILON;
+
+/// Allowance for the one rounding in the offset `c - p` (`f64` difference of
+/// the `f32` centroid and shading point), in units of `I_k / D^2` times
+/// `(D / (D - R))^3`: the series is evaluated for a point `p'` with
+/// `|p' - p| <= 2^-53 D`, and the node's exact sum moves by at most
+/// `|p' - p| sup |grad f| <= 2^-53 D * 2 I / (D - R)^3` (the gradient of
+/// `max(0, n.v) / |v|^3` has norm at most `2 / |v|^3`). `2 * f64::EPSILON =
+/// 2^-51` is twice that.
+pub const POINT_SLACK: f64 = 2.0 * f64::EPSILON;
 
 /// Relative widening of a cut's summed error bound for the rounding of its
 /// compensated sum: within two ulps of the sum of magnitudes (the terms are

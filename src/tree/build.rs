@@ -226,6 +226,166 @@ fn median_split(
     out
 }
 
+/// Absolute padding of the harmonic norms computed at build time, in units
+/// of `f64::EPSILON`, on top of one `f64::EPSILON` per member light, before
+/// they are rounded upward to `f32`.
+///
+/// A stored norm is `q = |C| / I_k` with `C` the `2l + 1` Schmidt
+/// semi-normalised solid-harmonic moments of degree `l` of the node's
+/// members, scaled by `1 / R` (so `|y / R| <= 1`). Each moment is a
+/// recursive `f64` sum of `n` terms; by Minkowski's inequality and
+/// `sum_j R_lj(y)^2 = |y|^(2l)` the vector of summation errors has norm at
+/// most `(n - 1) 2^-53 P I_k`, `P = sum_i I_ik |y_i / R|^l / I_k <= 1`. Each
+/// term is evaluated by [`solid_harmonics`] with at most 20 roundings on
+/// intermediate values of at most `20 |y|^l` after normalisation, plus the
+/// scaling `y / R` (two roundings, moving a harmonic by at most `2^9 eps |y|^l`):
+/// within `2^11 eps |y|^l` each, `2^13 eps P I_k` for the vector of `2l + 1 <= 11`.
+/// So the computed `q` is within `(n + 2^13) eps` of the exact one, up to a
+/// few relative ulps that the final `1 + BUILD_LENGTH_SLACK` covers;
+/// `2^16` leaves a factor 8. A test checks the addition theorem on the
+/// evaluated harmonics.
+const HARMONIC_BUILD_PAD: f64 = 65_536.0;
+
+/// Number of real solid harmonics of degrees 3, 4 and 5: `7 + 9 + 11`.
+pub(crate) const HARMONIC_COUNT: usize = 27;
+
+/// Index of the first harmonic of degree `l` (3, 4 or 5) in the output of
+/// [`solid_harmonics`].
+pub(crate) const fn harmonic_offset(l: usize) -> usize {
+    // Degrees below l hold sum_{j=3}^{l-1} (2j + 1) = l^2 - 9 harmonics.
+    l * l - 9
+}
+
+/// Squared Schmidt semi-normalisation of each output of [`solid_harmonics`]:
+/// `(2 - [m = 0]) (l - m)! / (l + m)!` for degree `l`, order `m`.
+pub(crate) const HARMONIC_NORM_SQ: [f64; HARMONIC_COUNT] = {
+    const fn factorial(k: usize) -> f64 {
+        let mut f = 1.0;
+        let mut i = 2;
+        while i <= k {
+            f *= i as f64;
+            i += 1;
+        }
+        f
+    }
+    let mut out = [0.0; HARMONIC_COUNT];
+    let mut l = 3;
+    while l <= 5 {
+        let mut m = 0;
+        while m <= l {
+            let v = factorial(l - m) / factorial(l + m);
+            if m == 0 {
+                out[harmonic_offset(l)] = v;
+            } else {
+                out[harmonic_offset(l) + 2 * m - 1] = 2.0 * v;
+                out[harmonic_offset(l) + 2 * m] = 2.0 * v;
+            }
+            m += 1;
+        }
+        l += 1;
+    }
+    out
+};
+
+/// The real regular solid harmonics of degrees 3, 4 and 5 at `y`, without
+/// their normalisation: for degree `l` and order `m = 0..=l`,
+/// `r^l P_l^m(cos theta)` times `cos(m phi)` and (for `m >= 1`)
+/// `sin(m phi)`, in that order. Multiplied by the square roots of
+/// [`HARMONIC_NORM_SQ`] they are Schmidt semi-normalised, for which the
+/// addition theorem reads `sum_j R_lj(a) R_lj(b) = |a|^l |b|^l P_l(a^ . b^)`;
+/// the sum of squares of one degree is `|y|^(2l)`.
+///
+/// Evaluated as `(x + i y)^m T_lm(z, r^2)` with
+/// `T_lm = r^(l-m) P_l^(m)(z / r)`, the `m`-th derivative of the Legendre
+/// polynomial made homogeneous (no Condon-Shortley phase; signs cancel in
+/// every product the crate forms).
+#[inline]
+pub(crate) fn solid_harmonics(y: DVec3) -> [f64; HARMONIC_COUNT] {
+    let (x, yy, z) = (y.x, y.y, y.z);
+    let r2 = y.length_squared();
+    let (z2, r4) = (z * z, r2 * r2);
+    let z3 = z2 * z;
+    // (x + i y)^m = c_m + i s_m.
+    let (c1, s1) = (x, yy);
+    let (c2, s2) = (c1 * x - s1 * yy, c1 * yy + s1 * x);
+    let (c3, s3) = (c2 * x - s2 * yy, c2 * yy + s2 * x);
+    let (c4, s4) = (c3 * x - s3 * yy, c3 * yy + s3 * x);
+    let (c5, s5) = (c4 * x - s4 * yy, c4 * yy + s4 * x);
+    let t30 = 0.5 * (5.0 * z3 - 3.0 * z * r2);
+    let t31 = 0.5 * (15.0 * z2 - 3.0 * r2);
+    let t32 = 15.0 * z;
+    let t33 = 15.0;
+    let t40 = 0.125 * (35.0 * z2 * z2 - 30.0 * z2 * r2 + 3.0 * r4);
+    let t41 = 0.5 * (35.0 * z3 - 15.0 * z * r2);
+    let t42 = 0.5 * (105.0 * z2 - 15.0 * r2);
+    let t43 = 105.0 * z;
+    let t44 = 105.0;
+    let t50 = 0.125 * (63.0 * z3 * z2 - 70.0 * z3 * r2 + 15.0 * z * r4);
+    let t51 = 0.125 * (315.0 * z2 * z2 - 210.0 * z2 * r2 + 15.0 * r4);
+    let t52 = 0.5 * (315.0 * z3 - 105.0 * z * r2);
+    let t53 = 0.5 * (945.0 * z2 - 105.0 * r2);
+    let t54 = 945.0 * z;
+    let t55 = 945.0;
+    [
+        t30,
+        t31 * c1,
+        t31 * s1,
+        t32 * c2,
+        t32 * s2,
+        t33 * c3,
+        t33 * s3,
+        t40,
+        t41 * c1,
+        t41 * s1,
+        t42 * c2,
+        t42 * s2,
+        t43 * c3,
+        t43 * s3,
+        t44 * c4,
+        t44 * s4,
+        t50,
+        t51 * c1,
+        t51 * s1,
+        t52 * c2,
+        t52 * s2,
+        t53 * c3,
+        t53 * s3,
+        t54 * c4,
+        t54 * s4,
+        t55 * c5,
+        t55 * s5,
+    ]
+}
+
+/// Harmonic norms of degrees 3 to 5 per channel (rounded upward, see
+/// [`HARMONIC_BUILD_PAD`]) from the unnormalised moments `moments[k]` of
+/// channel `k` (sums of `I_ik` times [`solid_harmonics`] of `y_i / R` over
+/// `terms` members) and the channel intensities.
+pub(crate) fn harmonic_norms(
+    moments: &[[f64; HARMONIC_COUNT]; 3],
+    intensity: DVec3,
+    terms: usize,
+) -> [Vec3; 3] {
+    let pad = (terms as f64 + HARMONIC_BUILD_PAD) * f64::EPSILON;
+    let mut out = [Vec3::ZERO; 3];
+    for (d, norms) in out.iter_mut().enumerate() {
+        let l = d + 3;
+        let range = harmonic_offset(l)..harmonic_offset(l) + 2 * l + 1;
+        for k in 0..3 {
+            if intensity[k] > 0.0 {
+                let sq: f64 = moments[k][range.clone()]
+                    .iter()
+                    .zip(&HARMONIC_NORM_SQ[range.clone()])
+                    .map(|(c, n)| c * c * n)
+                    .sum();
+                let q = sq.sqrt() / intensity[k];
+                norms[k] = round_up_f32((q + pad) * (1.0 + BUILD_LENGTH_SLACK));
+            }
+        }
+    }
+    out
+}
+
 /// Computes a node's statistics over `lights[idx[range]]` (all in `f64`,
 /// then stored as documented on [`Node`]).
 pub(super) fn node_stats(
@@ -261,25 +421,44 @@ pub(super) fn node_stats(
     let c = centroid.as_dvec3();
 
     let mut radius_sq = 0.0f64;
+    for &k in members {
+        let d = lights[k as usize].position.as_dvec3() - c;
+        radius_sq = radius_sq.max(d.length_squared());
+    }
+    let radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
+    let inv_radius = if radius > 0.0 {
+        1.0 / f64::from(radius)
+    } else {
+        0.0
+    };
+
     let mut first = [DVec3::ZERO; 3];
-    let mut second = [0.0f64; 6];
+    let mut second = [[0.0f64; 6]; 3];
+    let mut harmonic = [[0.0f64; HARMONIC_COUNT]; 3];
     for &k in members {
         let l = lights[k as usize];
         let d = l.position.as_dvec3() - c;
-        radius_sq = radius_sq.max(d.length_squared());
         let i = l.intensity.as_dvec3();
-        first[0] += i.x * d;
-        first[1] += i.y * d;
-        first[2] += i.z * d;
-        let w = f64::from(l.weight());
-        second[0] += w * d.x * d.x;
-        second[1] += w * d.y * d.y;
-        second[2] += w * d.z * d.z;
-        second[3] += w * d.x * d.y;
-        second[4] += w * d.x * d.z;
-        second[5] += w * d.y * d.z;
+        let products = [
+            d.x * d.x,
+            d.y * d.y,
+            d.z * d.z,
+            d.x * d.y,
+            d.x * d.z,
+            d.y * d.z,
+        ];
+        let scaled = d * inv_radius;
+        let harmonics = solid_harmonics(scaled);
+        for ch in 0..3 {
+            first[ch] += i[ch] * d;
+            for (acc, prod) in second[ch].iter_mut().zip(products) {
+                *acc += i[ch] * prod;
+            }
+            for (acc, h) in harmonic[ch].iter_mut().zip(harmonics) {
+                *acc += i[ch] * h;
+            }
+        }
     }
-    let radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
     let offset = |k: usize| -> Vec3 {
         if intensity[k] > 0.0 {
             (first[k] / intensity[k]).as_vec3()
@@ -287,28 +466,87 @@ pub(super) fn node_stats(
             Vec3::ZERO
         }
     };
-    let mut covariance = [0.0f32; 6];
-    if weight > 0.0 {
-        for (j, out) in covariance.iter_mut().enumerate() {
-            let v = second[j] / weight;
-            *out = if j < 3 {
-                round_up_f32(v * (1.0 + BUILD_LENGTH_SLACK))
-            } else {
-                v as f32
-            };
+    let sum_slack = members.len() as f64 * f64::EPSILON;
+    let mut covariances = [[0.0f32; 6]; 3];
+    for ch in 0..3 {
+        if intensity[ch] > 0.0 {
+            for (j, out) in covariances[ch].iter_mut().enumerate() {
+                let v = second[ch][j] / intensity[ch];
+                *out = if j < 3 {
+                    // A sum of n non-negative terms is within n 2^-53 of
+                    // exact (relative).
+                    round_up_f32(v * (1.0 + BUILD_LENGTH_SLACK + sum_slack))
+                } else {
+                    v as f32
+                };
+            }
         }
     }
+    let harmonic_norms = harmonic_norms(&harmonic, intensity, members.len());
     Node {
         intensity,
         weight,
         centroid,
         radius,
         channel_offsets: [offset(0), offset(1), offset(2)],
-        covariance,
+        channel_covariances: covariances,
+        harmonic_norms,
         aabb,
         first_light: range.start as u32,
         light_count: members.len() as u32,
         first_child: 0,
         child_count: 0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `P_l(x)` by the three-term recurrence.
+    fn legendre(l: usize, x: f64) -> f64 {
+        let (mut p0, mut p1) = (1.0, x);
+        for k in 2..=l {
+            (p0, p1) = (
+                p1,
+                ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64,
+            );
+        }
+        p1
+    }
+
+    /// The addition theorem `sum_j N_j^2 R_lj(a) R_lj(b) = |a|^l |b|^l
+    /// P_l(a^ . b^)` on points of the unit ball: it checks the recurrence,
+    /// the normalisation and, to `2^11 eps`, the evaluation error that
+    /// `HARMONIC_BUILD_PAD` assumes.
+    #[test]
+    fn solid_harmonics_satisfy_the_addition_theorem() {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut uniform = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for _ in 0..10_000 {
+            let a = DVec3::new(uniform(), uniform(), uniform());
+            let b = DVec3::new(uniform(), uniform(), uniform());
+            if a.length() > 1.0 || b.length() > 1.0 || a.length() == 0.0 || b.length() == 0.0 {
+                continue;
+            }
+            let (ha, hb) = (solid_harmonics(a), solid_harmonics(b));
+            for l in 3..=5 {
+                let range = harmonic_offset(l)..harmonic_offset(l) + 2 * l + 1;
+                let sum: f64 = range.map(|j| HARMONIC_NORM_SQ[j] * ha[j] * hb[j]).sum();
+                let cos = (a.dot(b) / (a.length() * b.length())).clamp(-1.0, 1.0);
+                let expected =
+                    a.length().powi(l as i32) * b.length().powi(l as i32) * legendre(l, cos);
+                let scale = a.length().powi(l as i32) * b.length().powi(l as i32);
+                assert!(
+                    (sum - expected).abs() <= 2048.0 * f64::EPSILON * scale,
+                    "degree {l}: {sum} against {expected}"
+                );
+            }
+        }
     }
 }

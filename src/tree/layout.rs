@@ -26,9 +26,15 @@ use crate::geometry::{Aabb, Cone};
 /// * [`channel_offsets`](Self::channel_offsets) `o_k = sum_i I_ik (x_i - c) / I_k`
 ///   per channel `k` (zero when `I_k = 0`): the first moment that the scalar
 ///   weight does not cancel when member colours differ;
-/// * [`covariance`](Self::covariance) `S = sum_i w_i (x_i - c)(x_i - c)^T / W`,
-///   diagonal rounded upward.
-///
+/// * [`channel_covariances`](Self::channel_covariances)
+///   `S_k = sum_i I_ik (x_i - c)(x_i - c)^T / I_k` per channel (zero when
+///   `I_k = 0`), diagonals rounded upward;
+/// * [`harmonic_norms`](Self::harmonic_norms) `q_lk` for degrees `l = 3, 4,
+///   5` per channel: the norm of the node's degree-`l` multipole,
+///   `q_lk^2 = sum_ij I_ik I_jk |y_i|^l |y_j|^l P_l(y^_i . y^_j) / (I_k R^l)^2`
+///   with `y_i = x_i - c`, `y^_i = y_i / |y_i|` and `P_l` the Legendre
+///   polynomial, rounded upward (at most 1, far less where the members'
+///   multipoles cancel);
 /// * [`aabb`](Self::aabb): the tight box of the members.
 ///
 /// Its lights occupy a contiguous range of the tree's leaf order; its children,
@@ -43,8 +49,10 @@ pub struct Node {
     pub(crate) centroid: Vec3,
     pub(crate) radius: f32,
     pub(crate) channel_offsets: [Vec3; 3],
-    /// xx, yy, zz, xy, xz, yz
-    pub(crate) covariance: [f32; 6],
+    /// Per channel: xx, yy, zz, xy, xz, yz.
+    pub(crate) channel_covariances: [[f32; 6]; 3],
+    /// Per degree 3, 4, 5: the three channels' norms.
+    pub(crate) harmonic_norms: [Vec3; 3],
     pub(crate) aabb: Aabb,
     pub(crate) first_light: u32,
     pub(crate) light_count: u32,
@@ -79,18 +87,33 @@ impl Node {
     pub fn channel_offsets(&self) -> [Vec3; 3] {
         self.channel_offsets
     }
-    /// Weight-normalized second moment matrix about the centroid as
-    /// `[xx, yy, zz, xy, xz, yz]`; its trace is the mean squared member
-    /// distance `sum_i w_i |x_i - c|^2 / W`.
+    /// Per-channel second moment matrices about the centroid, each
+    /// normalized by the channel's intensity, as `[xx, yy, zz, xy, xz, yz]`:
+    /// `S_k = sum_i I_ik (x_i - c)(x_i - c)^T / I_k` (zero when `I_k = 0`).
+    /// Diagonals are rounded upward, so each trace bounds the channel's
+    /// mean squared member distance from above.
     #[inline]
-    pub fn covariance(&self) -> [f32; 6] {
-        self.covariance
+    pub fn channel_covariances(&self) -> [[f32; 6]; 3] {
+        self.channel_covariances
     }
-    /// Trace of [`covariance`](Self::covariance): `sum_i w_i |x_i - c|^2 / W`.
+    /// Traces of [`channel_covariances`](Self::channel_covariances): per
+    /// channel `k`, `sum_i I_ik |x_i - c|^2 / I_k`.
     #[inline]
-    pub fn mean_squared_radius(&self) -> f64 {
-        let s = self.covariance;
-        f64::from(s[0]) + f64::from(s[1]) + f64::from(s[2])
+    pub fn mean_squared_radii(&self) -> DVec3 {
+        let t = |s: &[f32; 6]| f64::from(s[0]) + f64::from(s[1]) + f64::from(s[2]);
+        let s = &self.channel_covariances;
+        DVec3::new(t(&s[0]), t(&s[1]), t(&s[2]))
+    }
+    /// Harmonic norms of the node's multipoles of degrees 3, 4 and 5
+    /// (`[degree 3, degree 4, degree 5]`, each per channel), in units of
+    /// `I_k R^l`: `q_lk = |sum_i I_ik R_l(x_i - c)| / (I_k R^l)` with `R_l`
+    /// the `2l + 1` Schmidt semi-normalised regular solid harmonics of degree
+    /// `l`. By the addition theorem of spherical harmonics
+    /// `q_lk^2 R^(2l) I_k^2 = sum_ij I_ik I_jk |y_i|^l |y_j|^l P_l(y^_i . y^_j)`.
+    /// Rounded upward; in `[0, 1]` up to that rounding.
+    #[inline]
+    pub fn harmonic_norms(&self) -> [Vec3; 3] {
+        self.harmonic_norms
     }
     /// Tight axis-aligned box of the member lights.
     #[inline]

@@ -2,6 +2,7 @@
 
 use glam::DVec3;
 
+use super::build::{HARMONIC_COUNT, harmonic_norms, solid_harmonics};
 use super::layout::LightTree;
 use crate::ValidationError;
 use crate::numeric::SUM_TOLERANCE;
@@ -15,8 +16,9 @@ impl LightTree {
     /// * Every node's intensity is the sum of its children's (leaves: of
     ///   their lights), to `f64` rounding.
     /// * Every member light lies inside its node's stored ball (`|x - c| <= R`)
-    ///   and box, and the stored diagonal second moments are at least the
-    ///   members' (they are rounded upward).
+    ///   and box; the stored diagonal second moments of each channel are at
+    ///   least the members' (they are rounded upward), and so are the
+    ///   harmonic norms (recomputed from the members).
     /// * Every stored value is finite.
     ///
     /// Time `O(n * depth)`. Property tests call it on every tree they build.
@@ -53,7 +55,12 @@ impl LightTree {
                 && node.centroid.is_finite()
                 && node.radius.is_finite()
                 && node.channel_offsets.iter().all(|o| o.is_finite())
-                && node.covariance.iter().all(|v| v.is_finite());
+                && node
+                    .channel_covariances
+                    .iter()
+                    .flatten()
+                    .all(|v| v.is_finite())
+                && node.harmonic_norms.iter().all(|q| q.is_finite());
             if !finite {
                 return Err(ValidationError::NonFinite { node: i });
             }
@@ -94,7 +101,9 @@ impl LightTree {
             let c = node.centroid.as_dvec3();
             let r = f64::from(node.radius);
             let aabb = node.aabb;
-            let mut second = [0.0f64; 3];
+            let inv_radius = if r > 0.0 { 1.0 / r } else { 0.0 };
+            let mut second = [DVec3::ZERO; 3];
+            let mut moments = [[0.0f64; HARMONIC_COUNT]; 3];
             for (k, l) in members.iter().enumerate() {
                 let d = l.position.as_dvec3() - c;
                 if d.length() > r || !aabb.contains(l.position) {
@@ -103,14 +112,28 @@ impl LightTree {
                         light: range.start + k,
                     });
                 }
-                let w = f64::from(l.weight());
-                second[0] += w * d.x * d.x;
-                second[1] += w * d.y * d.y;
-                second[2] += w * d.z * d.z;
+                let intensity = l.intensity.as_dvec3();
+                let harmonics = solid_harmonics(d * inv_radius);
+                for ch in 0..3 {
+                    second[ch] += intensity[ch] * d * d;
+                    for (acc, h) in moments[ch].iter_mut().zip(harmonics) {
+                        *acc += intensity[ch] * h;
+                    }
+                }
             }
-            if node.weight > 0.0 {
-                for (member, stored) in second.iter().zip(node.covariance) {
-                    if *member > f64::from(stored) * node.weight * (1.0 + SUM_TOLERANCE) {
+            let recomputed = harmonic_norms(&moments, node.intensity, members.len());
+            for ch in 0..3 {
+                let stored = node.channel_covariances[ch];
+                let weight = node.intensity[ch] * (1.0 + SUM_TOLERANCE);
+                for axis in 0..3 {
+                    if second[ch][axis] > f64::from(stored[axis]) * weight {
+                        return Err(ValidationError::MomentMismatch { node: i });
+                    }
+                }
+                for (stored, fresh) in node.harmonic_norms.iter().zip(&recomputed) {
+                    // Both are rounded upward from sums of the same terms
+                    // (in another order: the build reorders lights later).
+                    if f64::from(fresh[ch]) > f64::from(stored[ch]) * (1.0 + SUM_TOLERANCE) {
                         return Err(ValidationError::MomentMismatch { node: i });
                     }
                 }
