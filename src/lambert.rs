@@ -261,6 +261,19 @@ fn quadratic_form(s: &[f64; 6], e: DVec3) -> f64 {
         + 2.0 * (s[3] * e.x * e.y + s[4] * e.x * e.z + s[5] * e.y * e.z)
 }
 
+/// The tail sums from degree 6 for `sigma < 1` and `inv_rho = 1 / (1 - sigma)`:
+/// `G1 = sum_(j>=0) (7 + j) sigma^j = 7 / (1 - sigma) + sigma / (1 - sigma)^2`
+/// and `G2 = sum_(j>=0) (6 + j)(7 + j) / 2 sigma^j
+/// = [42 / (1 - sigma) + 13 sigma / (1 - sigma)^2 + sigma (1 + sigma) / (1 - sigma)^3] / 2`
+/// (from `sum j sigma^j = sigma / (1 - sigma)^2` and
+/// `sum j^2 sigma^j = sigma (1 + sigma) / (1 - sigma)^3`).
+#[inline(always)]
+fn tail_sums(sigma: f64, inv_rho: f64) -> (f64, f64) {
+    let g1 = 7.0 * inv_rho + sigma * inv_rho * inv_rho;
+    let g2 = 0.5 * inv_rho * (42.0 + inv_rho * sigma * (13.0 + (1.0 + sigma) * inv_rho));
+    (g1, g2)
+}
+
 /// Lowest and highest value of `n.(x - p)` over the node's box (heights
 /// above the tangent plane at the shading point), widened outward by the
 /// rounding of the box's `f64` support function (a few ulps of the
@@ -567,8 +580,7 @@ impl Lambert {
         }
         // Tail from degree 6: mu_5 = mu_prev, mu_6 <= sigma mu_5.
         let mu6 = mu_prev * sigma;
-        let g1 = 7.0 * inv_rho + sigma * inv_rho * inv_rho;
-        let g2 = 0.5 * inv_rho * (42.0 + inv_rho * sigma * (13.0 + (1.0 + sigma) * inv_rho));
+        let (g1, g2) = tail_sums(sigma, inv_rho);
         let tail = mu6 * g1;
         remainder += tail.min(tail * ac + mu_prev * (hperp * g2));
 
@@ -588,3 +600,33 @@ impl Lambert {
 }
 
 impl ViewIndependent for Lambert {}
+
+#[cfg(test)]
+mod tests {
+    use super::tail_sums;
+
+    /// The closed forms of the tail sums against the series summed term by
+    /// term.
+    #[test]
+    fn tail_sums_match_their_series() {
+        for i in 0..=99 {
+            let sigma = f64::from(i) / 100.0;
+            let (g1, g2) = tail_sums(sigma, 1.0 / (1.0 - sigma));
+            let (mut s1, mut s2, mut power) = (0.0, 0.0, 1.0);
+            for j in 0..20_000 {
+                let j = f64::from(j);
+                s1 += (7.0 + j) * power;
+                s2 += (6.0 + j) * (7.0 + j) / 2.0 * power;
+                power *= sigma;
+            }
+            assert!(
+                (g1 - s1).abs() <= 1e-12 * s1,
+                "G1 at {sigma}: {g1} against {s1}"
+            );
+            assert!(
+                (g2 - s2).abs() <= 1e-12 * s2,
+                "G2 at {sigma}: {g2} against {s2}"
+            );
+        }
+    }
+}
