@@ -13,6 +13,7 @@
 //!   [`occluded`], [`scaling`]), [`plot`], [`csv`], [`summary`], and the
 //!   ground scene's evaluations-per-point table ([`evaluations`]).
 
+pub mod bounds;
 pub mod bvh;
 pub mod camera;
 pub mod compare;

@@ -7,7 +7,9 @@
 //! cargo run --release -p manylights-report -- city scaling    # only some parts
 //! ```
 //!
-//! Parts: `evaluations` (the ground scene's evaluations per point), `city`, `chandelier`,
+//! Parts: `evaluations` (the ground scene's evaluations per point), `bounds`
+//! (the Lambert bounds on the coloured street city, with build time and
+//! memory), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
 //! `city-shadows` (the occluded scene) and `scaling` (time against number of
 //! lights); no part named means all. Writes to `out/report/` under the
@@ -30,6 +32,7 @@ use std::fs;
 use std::path::Path;
 use std::time::Instant;
 
+use manylights_report::bounds::print_bounds_table;
 use manylights_report::config::{
     self, FULL, OCCLUDED, PAPER_RELATIVE, PER_NODE, QUICK, SAMPLE_COUNTS, SCALING, SCENE_NAMES,
     SEED, SHADOW_PER_NODE, SHADOW_RELATIVE, TREE_ABSOLUTE, TREE_RELATIVE, WARD,
@@ -46,6 +49,8 @@ use manylights_report::sweep::run_scene;
 
 /// The ground scene's table, as a part.
 const EVALUATIONS: &str = "evaluations";
+/// The Lambert bounds on the coloured street city, as a part.
+const BOUNDS: &str = "bounds";
 
 fn main() -> Result<(), Box<dyn Error>> {
     let started = Instant::now();
@@ -55,14 +60,14 @@ fn main() -> Result<(), Box<dyn Error>> {
         match arg.as_str() {
             "--quick" => quick = true,
             name if SCENE_NAMES.contains(&name)
-                || [EVALUATIONS, OCCLUDED, SCALING].contains(&name) =>
+                || [EVALUATIONS, BOUNDS, OCCLUDED, SCALING].contains(&name) =>
             {
                 parts.push(arg)
             }
             _ => {
                 return Err(format!(
-                    "unknown argument {arg:?}; usage: report [--quick] [{EVALUATIONS} | {} | \
-                     {OCCLUDED} | {SCALING}]...",
+                    "unknown argument {arg:?}; usage: report [--quick] [{EVALUATIONS} | {BOUNDS} | \
+                     {} | {OCCLUDED} | {SCALING}]...",
                     SCENE_NAMES.join(" | ")
                 )
                 .into());
@@ -80,6 +85,9 @@ fn main() -> Result<(), Box<dyn Error>> {
     );
     if wanted(EVALUATIONS) {
         print_evaluations_table()?;
+    }
+    if wanted(BOUNDS) && !quick {
+        print_bounds_table()?;
     }
     println!("{METHODS}");
     println!(
