@@ -37,10 +37,11 @@ impl PointLight {
     /// its largest channel.
     ///
     /// The largest channel is used (rather than luminance or the channel sum)
-    /// because it dominates every channel: `intensity[k] <= weight()` for each
-    /// `k`, which lets one scalar-weighted second moment bound the per-channel
-    /// second moments (see [`Lambert`](crate::Lambert)). For grey lights it is
-    /// the common channel value.
+    /// because it dominates every channel (`intensity[k] <= weight()` for each
+    /// `k`): a node's centroid then stays where every channel has weight.
+    /// Per-channel first and second moments and harmonic norms (see
+    /// [`Node`](crate::Node)) carry what one scalar weight cannot. For grey
+    /// lights it is the common channel value.
     #[must_use]
     pub fn weight(&self) -> f32 {
         self.intensity.max_element()
