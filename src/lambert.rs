@@ -367,15 +367,19 @@ impl Shader for Lambert {
         let depth = (sd - z).min(-lowest * inv_d).max(0.0);
         let straddle = depth * inv_rho3;
         let geometry = Geometry {
+            surface,
+            node,
+            cone,
+            scale,
             z,
             sin_c,
             inv_rho,
             straddle,
         };
         let (lo2, hi2, estimate) = if self.kind == BoundKind::Taylor {
-            self.taylor(surface, node, cone, &geometry, scale)
+            self.taylor(&geometry)
         } else {
-            self.series(surface, node, cone, &geometry, scale)
+            self.series(&geometry)
         };
         let lo = lower.max(lo2);
         let hi = upper.min(hi2);
@@ -398,7 +402,12 @@ impl Shader for Lambert {
 
 /// What both refined bounds share: the normal against the axis, the
 /// nearest distance, and the below-the-plane term.
-struct Geometry {
+struct Geometry<'a> {
+    surface: &'a Surface,
+    node: &'a Node,
+    cone: &'a Cone,
+    /// `I kd / D^2` per channel.
+    scale: DVec3,
     /// `n . uh`.
     z: f64,
     /// `|n x uh|`.
@@ -412,14 +421,8 @@ struct Geometry {
 impl Lambert {
     /// The second-order Taylor interval `(lower, upper, estimate)`.
     #[inline]
-    fn taylor(
-        &self,
-        surface: &Surface,
-        node: &Node,
-        cone: &Cone,
-        geo: &Geometry,
-        scale: DVec3,
-    ) -> (DVec3, DVec3, Option<DVec3>) {
+    fn taylor(&self, geo: &Geometry<'_>) -> (DVec3, DVec3, Option<DVec3>) {
+        let (surface, node, cone, scale) = (geo.surface, geo.node, geo.cone, geo.scale);
         let n = surface.normal;
         let (z, sin_c, inv_rho) = (geo.z, geo.sin_c, geo.inv_rho);
         let inv_d = cone.inv_distance;
@@ -501,14 +504,8 @@ impl Lambert {
     /// widened upward by the clamp term; the estimate is the final
     /// interval's midpoint.
     #[inline]
-    fn series(
-        &self,
-        surface: &Surface,
-        node: &Node,
-        cone: &Cone,
-        geo: &Geometry,
-        scale: DVec3,
-    ) -> (DVec3, DVec3, Option<DVec3>) {
+    fn series(&self, geo: &Geometry<'_>) -> (DVec3, DVec3, Option<DVec3>) {
+        let (surface, node, cone, scale) = (geo.surface, geo.node, geo.cone, geo.scale);
         let n = surface.normal;
         let uh = cone.axis;
         let c0 = geo.z;

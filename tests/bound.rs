@@ -14,19 +14,6 @@ use proptest::prelude::*;
 /// Phong exponents from the constant lobe to the sharpest supported, all property-tested.
 const EXPONENTS: [f32; 6] = [0.0, 1.0, 10.0, 100.0, 1e4, 1e6];
 
-/// 96 cases per property in CI; `PROPTEST_CASES=N` overrides it for long
-/// runs.
-fn config() -> ProptestConfig {
-    let cases = std::env::var("PROPTEST_CASES")
-        .ok()
-        .and_then(|c| c.parse().ok())
-        .unwrap_or(96);
-    ProptestConfig {
-        cases,
-        ..ProptestConfig::default()
-    }
-}
-
 fn albedo() -> impl Strategy<Value = Vec3> {
     (0.0f32..=1.0, 0.0f32..=1.0, 0.0f32..=1.0).prop_map(|(r, g, b)| Vec3::new(r, g, b))
 }
@@ -71,7 +58,7 @@ fn check_point<S: Shader>(
 }
 
 proptest! {
-    #![proptest_config(config())]
+    #![proptest_config(cases(96))]
 
     #[test]
     fn lambert_bound_holds(

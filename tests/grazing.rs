@@ -26,7 +26,7 @@ mod common;
 
 use std::ops::{Add, Div, Mul, Neg};
 
-use common::{direction, intensity, threshold, vec_in};
+use common::{cases, direction, intensity, threshold, vec_in};
 use glam::{DVec3, Vec3};
 use manylights::{
     BoundKind, Combined, Lambert, LightTree, Phong, PointLight, Query, ShadeResult, Shader,
@@ -567,18 +567,6 @@ fn exponent() -> impl Strategy<Value = f32> {
 // ---------------------------------------------------------------------------
 // Checks.
 
-/// 64 cases per property by default; `PROPTEST_CASES=N` overrides it.
-fn config() -> ProptestConfig {
-    let cases = std::env::var("PROPTEST_CASES")
-        .ok()
-        .and_then(|c| c.parse().ok())
-        .unwrap_or(64);
-    ProptestConfig {
-        cases,
-        ..ProptestConfig::default()
-    }
-}
-
 /// The contract, [`ShadeResult::certifies`], up to what `f64` cannot hold:
 /// a term below `f64::MIN_POSITIVE` is subnormal, rounded to a multiple of
 /// `2^-1074` whatever its relative accuracy, so `4 * 2^-1074` per light is
@@ -660,7 +648,7 @@ fn check_phong(scene: &Scene, ks: Vec3, e: f32, t: Threshold) -> Result<(), Test
 }
 
 proptest! {
-    #![proptest_config(config())]
+    #![proptest_config(cases(64))]
 
     /// Lights in, and `2^-k` off, the tangent plane: the exact terms, the
     /// cut and the paper's node bound.
@@ -687,7 +675,7 @@ proptest! {
 }
 
 proptest! {
-    #![proptest_config(config())]
+    #![proptest_config(cases(64))]
 
     /// The series (default) and second-order Taylor bounds at grazing
     /// incidence: their slacks cover the absolute rounding of the centroid's

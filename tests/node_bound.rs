@@ -12,22 +12,12 @@
 //! line to the node's farthest member, with facing, grazing (down to
 //! exactly perpendicular), straddling, averted and random normals.
 
+mod common;
+
+use common::cases;
 use glam::{DVec3, Vec3};
 use manylights::{BoundKind, Lambert, LightTree, PointLight, ShadeResult, Shader, Surface};
 use proptest::prelude::*;
-
-/// 64 cases per property in CI; `PROPTEST_CASES=N` overrides it for long
-/// runs.
-fn config() -> ProptestConfig {
-    let cases = std::env::var("PROPTEST_CASES")
-        .ok()
-        .and_then(|c| c.parse().ok())
-        .unwrap_or(64);
-    ProptestConfig {
-        cases,
-        ..ProptestConfig::default()
-    }
-}
 
 /// A unit vector, uniform on the sphere.
 fn unit() -> impl Strategy<Value = DVec3> {
@@ -312,7 +302,7 @@ fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<boo
 }
 
 proptest! {
-    #![proptest_config(config())]
+    #![proptest_config(cases(64))]
 
     /// Every bound kind contains the exact node sum, per channel, and its
     /// estimate lies in its interval.
@@ -424,7 +414,7 @@ fn legendre_derivative(m: usize, x: f64) -> f64 {
 }
 
 proptest! {
-    #![proptest_config(config())]
+    #![proptest_config(cases(64))]
 
     /// A light pair on a line through the point, offset across it along the
     /// normal, at grazing incidence with both lights just above the tangent

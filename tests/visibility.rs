@@ -13,7 +13,7 @@
 
 mod common;
 
-use common::{check_bound, check_threshold, direction, lights, threshold, vec_in};
+use common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::{DVec3, Vec3};
 use manylights::{
     Aabb, Coverage, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeResult, Stop,
@@ -607,15 +607,8 @@ fn any_threshold() -> impl Strategy<Value = Threshold> {
     ]
 }
 
-fn config() -> ProptestConfig {
-    ProptestConfig {
-        cases: 256,
-        ..ProptestConfig::default()
-    }
-}
-
 proptest! {
-    #![proptest_config(config())]
+    #![proptest_config(cases(256))]
 
     #[test]
     fn lambert_bound_holds_with_occluders(

@@ -19,6 +19,19 @@ use glam::Vec3;
 use manylights::{PointLight, ShadeResult, Threshold};
 use proptest::prelude::*;
 
+/// A proptest configuration of `default` cases per property, which the
+/// `PROPTEST_CASES` environment variable overrides for long runs.
+pub fn cases(default: u32) -> ProptestConfig {
+    let cases = std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(default);
+    ProptestConfig {
+        cases,
+        ..ProptestConfig::default()
+    }
+}
+
 /// A finite `Vec3` with each coordinate uniform in `[-h, h]`.
 pub fn vec_in(h: f32) -> impl Strategy<Value = Vec3> {
     (-h..=h, -h..=h, -h..=h).prop_map(|(x, y, z)| Vec3::new(x, y, z))
