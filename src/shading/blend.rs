@@ -4,7 +4,7 @@
 
 use glam::DVec3;
 
-use super::error_list::{Class, Entry, ErrorList, Item, Seen};
+use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::refine::{Cut, reported_bound};
 #[cfg(doc)]
 use super::threshold::Threshold;
@@ -58,19 +58,18 @@ pub(crate) fn blend<S: Shader, V: Visibility>(
     // Each pending node carries the product of the refinement weights of its
     // ancestors; its own share (1 - alpha) keeps its virtual-light estimate
     // and the rest (alpha) goes to its children.
-    // Lamps and lights are exact up to their visibility: nothing to blend.
     let mut settle = |e: Entry, weight: f64, stack: &mut Vec<Pending>| {
-        let alpha = match e.item {
-            Item::Node(_) if e.class == Class::Unbounded => 1.0,
-            Item::Node(_) => ramp(e.key),
-            Item::Lamp(_) | Item::Light(_) => 0.0,
+        let alpha = if e.class == Class::Unbounded {
+            1.0
+        } else {
+            ramp(e.key)
         };
         let (e_estimate, e_error) = e.counted();
         estimate.add(e_estimate * (weight * (1.0 - alpha)));
         error.add(e_error * (weight * (1.0 - alpha)));
-        if let (Item::Node(node), true) = (e.item, alpha > 0.0) {
+        if alpha > 0.0 {
             stack.push(Pending {
-                node,
+                node: e.node,
                 weight: weight * alpha,
                 visible: e.seen == Seen::Visible,
             });

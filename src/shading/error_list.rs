@@ -21,18 +21,6 @@ pub(crate) enum Class {
     Unbounded,
 }
 
-/// What an entry of the cut stands for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Item {
-    /// A node with a finite bound (or none: [`Class::Unbounded`]).
-    Node(u32),
-    /// A node whose lights all sit at its centroid (one light, or coincident
-    /// ones): one light of the node's summed intensity.
-    Lamp(u32),
-    /// One light, by its index in the tree's leaf order.
-    Light(u32),
-}
-
 /// What the host has said about an entry's visibility.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Seen {
@@ -45,15 +33,15 @@ pub(crate) enum Seen {
     Partial(Option<f32>),
 }
 
-/// An entry of the cut: a node or light not refined (or not asked) yet.
+/// An entry of the cut: a node not refined (or not asked about) yet.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Entry {
     pub(crate) class: Class,
     /// Largest channel of the counted error: the error list's key.
     pub(crate) key: f64,
-    pub(crate) item: Item,
+    pub(crate) node: u32,
     pub(crate) seen: Seen,
-    /// The unoccluded estimate and its error (exact values have error 0).
+    /// The unoccluded estimate and its error.
     pub(crate) estimate: DVec3,
     pub(crate) error: DVec3,
 }
@@ -61,11 +49,11 @@ pub(crate) struct Entry {
 impl Entry {
     /// An entry with its key set from what it counts for.
     #[inline]
-    pub(crate) fn new(class: Class, item: Item, seen: Seen, estimate: DVec3, error: DVec3) -> Self {
+    pub(crate) fn new(class: Class, node: u32, seen: Seen, estimate: DVec3, error: DVec3) -> Self {
         let mut e = Self {
             class,
             key: 0.0,
-            item,
+            node,
             seen,
             estimate,
             error,

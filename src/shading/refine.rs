@@ -4,7 +4,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::error_list::{Class, Entry, ErrorList, Item, Seen};
+use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::result::Stop;
 use super::threshold::Threshold;
 use crate::geometry::Surface;
@@ -118,14 +118,9 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             let Some(top) = list.peek().copied() else {
                 break;
             };
-            let refined = match top.item {
-                Item::Node(index) => Some(self.tree.nodes[index as usize]),
-                Item::Lamp(_) | Item::Light(_) => None,
-            };
+            let node = self.tree.nodes[top.node as usize];
             let refining = top.seen != Seen::Unknown || self.gave_up_classifying();
-            if let Some(node) = refined.filter(|_| refining)
-                && !self.can_refine(&node)
-            {
+            if refining && !self.can_refine(&node) {
                 outcome.stop = Stop::Budget;
                 break;
             }
@@ -141,21 +136,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 outcome.last_step = Some((before, top.key));
             }
             list.pop();
-            match (refined, refining) {
-                (Some(node), true) => {
-                    let visible = top.seen == Seen::Visible;
-                    self.refine(&node, visible, 1.0, |e| list.push(e));
-                }
-                (Some(node), false) => {
-                    if let Some(e) = self.classify(&node, top) {
-                        list.push(e);
-                    }
-                }
-                (None, _) => {
-                    if self.ask_point(top.item) {
-                        self.settled.add(top.estimate);
-                    }
-                }
+            if refining {
+                let visible = top.seen == Seen::Visible;
+                self.refine(&node, visible, 1.0, |e| list.push(e));
+            } else if let Some(e) = self.classify(&node, top) {
+                list.push(e);
             }
         }
         outcome
@@ -190,11 +175,8 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// estimated at the host's visible fraction if it gives one, and refined
     /// when the cut takes it again.
     fn classify(&mut self, node: &Node, top: Entry) -> Option<Entry> {
-        let Item::Node(index) = top.item else {
-            unreachable!("only nodes are classified")
-        };
         self.classify_queries += 1;
-        let region = region(node, index as usize);
+        let region = region(node, top.node as usize);
         let seen = match self.visibility.classify(self.point, &region) {
             Coverage::Occluded => {
                 self.decisive_answers += 1;
@@ -211,24 +193,12 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     .map(|f| f.clamp(0.0, 1.0)),
             ),
         };
-        let e = Entry::new(top.class, top.item, seen, top.estimate, top.error);
+        let e = Entry::new(top.class, top.node, seen, top.estimate, top.error);
         if e.key <= 0.0 && e.class == Class::Error {
             self.settled.add(e.counted().0);
             return None;
         }
         Some(e)
-    }
-
-    /// Asks the host point-to-point about a lamp or light of unknown
-    /// visibility: whether it is visible.
-    fn ask_point(&mut self, item: Item) -> bool {
-        let position = match item {
-            Item::Lamp(index) => self.tree.nodes[index as usize].centroid,
-            Item::Light(index) => self.tree.lights[index as usize].position,
-            Item::Node(_) => unreachable!("nodes are classified, not asked point-to-point"),
-        };
-        self.point_queries += 1;
-        self.visibility.visible(self.point, position)
     }
 
     /// Evaluates node `index` entering the cut with blend weight `weight`:
@@ -253,19 +223,14 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             // A single light, or coincident lights (the build makes them one
             // leaf): exactly one light of the summed intensity at the
             // centroid, whatever their number.
-            return self.exact_light(
-                Item::Lamp(index as u32),
-                node.centroid,
-                node.intensity,
-                seen,
-                weight,
-            );
+            self.exact_light(node.centroid, node.intensity, seen, weight);
+            return None;
         }
         self.nodes += 1;
         let Some(cone) = node.cone(self.surface.point) else {
             return Some(Entry::new(
                 Class::Unbounded,
-                Item::Node(index as u32),
+                index as u32,
                 seen,
                 DVec3::ZERO,
                 DVec3::ZERO,
@@ -282,13 +247,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         } else {
             Class::Error
         };
-        let entry = Entry::new(
-            class,
-            Item::Node(index as u32),
-            seen,
-            bound.estimate,
-            bound.error(),
-        );
+        let entry = Entry::new(class, index as u32, seen, bound.estimate, bound.error());
         if entry.key <= 0.0 && !over {
             // Nothing to gain by refining (e.g. below the horizon).
             self.settled.add(entry.counted().0 * weight);
@@ -297,18 +256,18 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         Some(entry)
     }
 
-    /// One light's exact unoccluded contribution: settled (times `weight`)
-    /// when the light is known visible or contributes nothing, otherwise
-    /// returned as an entry to be asked about when the cut takes it.
+    /// One light's exact contribution, times `weight`, added to the settled
+    /// sum, unless the host says it is hidden: a light of unknown visibility
+    /// is asked about point-to-point at once (it enters the cut only when its
+    /// node is refined, and one ray settles it exactly).
     #[inline]
-    fn exact_light(
-        &mut self,
-        item: Item,
-        position: Vec3,
-        intensity: DVec3,
-        seen: Seen,
-        weight: f64,
-    ) -> Option<Entry> {
+    fn exact_light(&mut self, position: Vec3, intensity: DVec3, seen: Seen, weight: f64) {
+        if seen != Seen::Visible {
+            self.point_queries += 1;
+            if !self.visibility.visible(self.point, position) {
+                return;
+            }
+        }
         self.lights += 1;
         let value = self.shader.eval(
             &self.per_point,
@@ -316,19 +275,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             position.as_dvec3(),
             intensity,
         );
-        let over = self
-            .max_contribution
-            .is_some_and(|m| value.max_element() > m);
-        if seen == Seen::Visible || value == DVec3::ZERO {
-            self.settled.add(value * weight);
-            return None;
-        }
-        let class = if over {
-            Class::OverContribution
-        } else {
-            Class::Error
-        };
-        Some(Entry::new(class, item, seen, value, DVec3::ZERO))
+        self.settled.add(value * weight);
     }
 
     /// Refines `node`: its lights exactly if it is a leaf, its children
@@ -350,12 +297,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             };
             for k in node.lights() {
                 let l = self.tree.lights[k];
-                let item = Item::Light(k as u32);
-                if let Some(entry) =
-                    self.exact_light(item, l.position, l.intensity.as_dvec3(), seen, weight)
-                {
-                    pending(entry);
-                }
+                self.exact_light(l.position, l.intensity.as_dvec3(), seen, weight);
             }
         } else {
             for child in node.children() {
