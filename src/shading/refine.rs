@@ -258,16 +258,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
 
     /// One light's exact contribution, times `weight`, added to the settled
     /// sum, unless the host says it is hidden: a light of unknown visibility
-    /// is asked about point-to-point at once (it enters the cut only when its
-    /// node is refined, and one ray settles it exactly).
+    /// that contributes anything is asked about point-to-point at once (it
+    /// enters the cut only when its node is refined, and one ray settles it
+    /// exactly); dark lights and lights behind the surface need no ray.
     #[inline]
     fn exact_light(&mut self, position: Vec3, intensity: DVec3, seen: Seen, weight: f64) {
-        if seen != Seen::Visible {
-            self.point_queries += 1;
-            if !self.visibility.visible(self.point, position) {
-                return;
-            }
-        }
         self.lights += 1;
         let value = self.shader.eval(
             &self.per_point,
@@ -275,6 +270,15 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             position.as_dvec3(),
             intensity,
         );
+        if value == DVec3::ZERO {
+            return;
+        }
+        if seen != Seen::Visible {
+            self.point_queries += 1;
+            if !self.visibility.visible(self.point, position) {
+                return;
+            }
+        }
         self.settled.add(value * weight);
     }
 
