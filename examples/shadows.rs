@@ -40,13 +40,13 @@ fn main() -> Result<(), Box<dyn Error>> {
     // Each pixel's host counts its answers.
     let threshold = Threshold::relative(options.threshold);
     let (shaded, tree_time) = view.shade(|s, hit| {
-        let mut host = Shadows::new(&view.city, hit.normal);
+        let mut host = Shadows::new(&view.city.occluders, hit.normal);
         let r = s.shade_query(&Query::new(hit.point, hit.normal)?, threshold, &mut host)?;
         Ok((r, host.answers))
     })?;
     let results: Vec<Option<ShadeResult>> = shaded.iter().map(|s| s.map(|s| s.0)).collect();
     let (exact, exact_time) = view.shade(|s, hit| {
-        let host = Shadows::new(&view.city, hit.normal);
+        let host = Shadows::new(&view.city.occluders, hit.normal);
         Ok(s.exact_query(&Query::new(hit.point, hit.normal)?, host))
     })?;
 

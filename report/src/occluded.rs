@@ -1,14 +1,16 @@
-//! The occluded scene, `city-shadows`: the exact shadowed sum, the tree
-//! with the night city's conservative classifier ([`Shadows`]), Monte Carlo
-//! with a shadow ray per sample, and Ward's adaptive shadow testing.
+//! The occluded scenes, `city-shadows` and `canopy`: the exact shadowed
+//! sum, the tree with the conservative shaft classifier ([`Shadows`]),
+//! Monte Carlo with a shadow ray per sample, and Ward's adaptive shadow
+//! testing, all through the same BVH of occluders.
 
 use std::error::Error;
 
 use manylights::{Lambert, Threshold};
 
-use crate::config::{Config, SHADOW_PER_NODE, SHADOW_RELATIVE, SOA_TOLERANCE, TREE_ABSOLUTE, WARD};
+use crate::bvh::Occluders;
+use crate::config::{Config, OccludedSweeps, SOA_TOLERANCE};
 use crate::measure::{Method, Record, Sample, measure};
-use crate::scenes::{City, Scene, ShadingPoint};
+use crate::scenes::{Scene, ShadingPoint};
 use crate::shadowed::{ShadowLights, Ward};
 use crate::shadows::Shadows;
 use crate::sweep::{
@@ -16,33 +18,36 @@ use crate::sweep::{
     sample_sweeps,
 };
 
-/// The host of each shading point: the city's classifier and shadow rays.
-fn hosts<'c>(city: &'c City) -> impl Fn(&ShadingPoint) -> Shadows<'c> + Sync + 'c {
-    move |pt| Shadows::new(city, pt.normal)
+/// The host of each shading point: the shaft classifier and shadow rays
+/// against `occluders`.
+fn hosts<'o>(occluders: &'o Occluders) -> impl Fn(&ShadingPoint) -> Shadows<'o> + Sync + 'o {
+    move |pt| Shadows::new(occluders, pt.normal)
 }
 
-/// Every configuration of every method on the occluded scene, with `city`
-/// holding the buildings that occlude.
-pub fn run_occluded<'c>(
+/// The configurations `sweeps` of every method on an occluded scene, with
+/// `occluders` the boxes that occlude.
+pub fn run_occluded<'o>(
     scene: &Scene,
-    city: &'c City,
+    occluders: &'o Occluders,
     cfg: &Config,
+    sweeps: &OccludedSweeps,
 ) -> Result<Vec<Record>, Box<dyn Error>> {
     let (tree, build) = build_tree(scene)?;
     print_header(scene, &tree, build);
     let shader = Lambert::new(scene.material.kd);
-    let host = hosts(city);
+    let host = hosts(occluders);
     // The reference: the crate's exact shadowed sum (one shadow ray per
     // light); points no light reaches are dropped.
     let (points, refs) = references(&tree, shader, &scene.points, &host);
-    let on_ground = points.iter().filter(|p| p.normal.z > 0.5).count();
+    let up = points.iter().filter(|p| p.normal.z > 0.5).count();
     let median_radiance = median(refs.iter().map(|r| r.max_element()).collect());
     println!(
-        "  {} points ({on_ground} on the ground, {} on façades; {} dropped: unlit), median \
+        "  {} points ({up} facing up, {} sideways; {} dropped: unlit), {} occluders, median \
          exact shadowed radiance {median_radiance:.3e}",
         points.len(),
-        points.len() - on_ground,
-        scene.points.len() - points.len()
+        points.len() - up,
+        scene.points.len() - points.len(),
+        occluders.len()
     );
 
     let mut rows = Vec::new();
@@ -64,21 +69,21 @@ pub fn run_occluded<'c>(
     }
     record(Method::ExactShadowed, "-".into(), m);
 
-    let occluded: Option<&dyn Fn(&ShadingPoint) -> Shadows<'c>> = Some(&host);
+    let occluded: Option<&dyn Fn(&ShadingPoint) -> Shadows<'o>> = Some(&host);
     let bench = Bench::new(&points, &refs, budget);
     let cut = |threshold| measure_cut(&tree, shader, bench, threshold, occluded);
-    for t in SHADOW_RELATIVE {
+    for &t in sweeps.relative {
         record(
             Method::TreeRelative,
             format!("t={t}"),
             cut(Threshold::relative(t)),
         );
     }
-    for f in TREE_ABSOLUTE {
+    for &f in sweeps.absolute {
         let m = cut(Threshold::absolute(f * median_radiance));
         record(Method::TreeAbsolute, absolute_parameter(f), m);
     }
-    for t in SHADOW_PER_NODE {
+    for &t in sweeps.per_node {
         record(
             Method::PerNode,
             format!("t={t}"),
@@ -86,10 +91,10 @@ pub fn run_occluded<'c>(
         );
     }
 
-    sample_sweeps(&mut record, &tree, &shader, bench, occluded);
+    sample_sweeps(&mut record, &tree, &shader, bench, sweeps.samples, occluded);
 
     let mut ward = Ward::default();
-    for t in WARD {
+    for &t in sweeps.ward {
         let m = measure(&refs, budget, |i| {
             let pt = &points[i];
             let (radiance, rays) = ward.shade(&mut soa, pt.point, pt.normal, t, &mut host(pt));

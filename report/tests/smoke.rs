@@ -18,6 +18,8 @@ const TINY: Config = Config {
     strings_lights: 200,
     specular_lights: 200,
     shadow_lights: 300,
+    canopy_lights: 200,
+    canopy_points: 8,
     scaling_sizes: &[1, 100, 1_000],
     scaling_points: 8,
     budget: Duration::from_millis(1),
@@ -30,7 +32,10 @@ fn every_part_runs_and_keeps_the_bound() {
         records.extend(run_scene(&config::make_scene(name, &TINY), &TINY).unwrap());
     }
     let (scene, city) = scenes::city_shadows(TINY.shadow_lights, TINY.points, config::SEED);
-    records.extend(run_occluded(&scene, &city, &TINY).unwrap());
+    let sweeps = &config::CITY_SHADOWS_SWEEPS;
+    records.extend(run_occluded(&scene, &city.occluders, &TINY, sweeps).unwrap());
+    let (scene, leaves) = scenes::canopy(TINY.canopy_lights, TINY.canopy_points, config::SEED);
+    records.extend(run_occluded(&scene, &leaves, &TINY, &config::CANOPY_SWEEPS).unwrap());
     let scaling = run_scaling(&TINY).unwrap();
     for r in records
         .iter()
