@@ -12,6 +12,7 @@ use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb as BvhAabb;
 use obvhs::bvh2::Bvh2;
 use obvhs::bvh2::builder::build_bvh2;
+use obvhs::bvh2::node::Bvh2Node;
 use obvhs::fast_stack;
 use obvhs::faststack::FastStack;
 use obvhs::ray::{Ray, RayHit};
@@ -85,6 +86,8 @@ pub struct Occluders {
     boxes: Vec<BvhAabb>,
     ids: Vec<u32>,
     bvh: Bvh2,
+    /// Depth of the BVH: the traversal stack [`Occluders::any_in`] needs.
+    depth: usize,
 }
 
 impl Occluders {
@@ -100,6 +103,7 @@ impl Occluders {
                 boxes: Vec::new(),
                 ids: Vec::new(),
                 bvh: Bvh2::default(),
+                depth: 0,
             };
         }
         let mut bvh = build_bvh2(
@@ -113,6 +117,7 @@ impl Occluders {
         Self {
             boxes: ids.iter().map(|&i| input[i as usize]).collect(),
             ids,
+            depth: bvh.depth(0),
             bvh,
         }
     }
@@ -198,16 +203,16 @@ impl Occluders {
         if !enter(root.aabb()) {
             return false;
         }
-        let leaf = |first: u32, count: u32, visit: &mut dyn FnMut(&BvhAabb) -> bool| {
-            self.boxes[first as usize..(first + count) as usize]
-                .iter()
-                .any(visit)
+        let boxes = |node: &Bvh2Node| {
+            &self.boxes[node.first_index as usize..(node.first_index + node.prim_count) as usize]
         };
         if root.is_leaf() {
-            return leaf(root.first_index, root.prim_count, &mut visit);
+            return boxes(root).iter().any(visit);
         }
         let mut found = false;
-        fast_stack!(u32, (96, 192), self.bvh.max_depth, stack, {
+        // A stack as deep as the tree (obvhs sizes its own for the deepest
+        // tree it expects, 96 entries or more, and clears it per call).
+        fast_stack!(u32, (16, 32, 64, 128), self.depth + 1, stack, {
             // Inner nodes keep their two children side by side; the stack
             // holds the index of the first of a pair.
             stack.push(root.first_index);
@@ -219,7 +224,7 @@ impl Occluders {
                     }
                     if !node.is_leaf() {
                         stack.push(node.first_index);
-                    } else if leaf(node.first_index, node.prim_count, &mut visit) {
+                    } else if boxes(node).iter().any(&mut visit) {
                         found = true;
                         break 'pairs;
                     }

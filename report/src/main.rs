@@ -104,6 +104,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     );
 
     let mut records = Vec::new();
+    let mut targets = Vec::new();
     for name in SCENE_NAMES.into_iter().filter(|n| wanted(n)) {
         let scene = config::make_scene(name, cfg);
         let rows = run_scene(&scene, cfg)?;
@@ -120,7 +121,8 @@ fn main() -> Result<(), Box<dyn Error>> {
             let (scene, city) = city_shadows(cfg.shadow_lights, cfg.points, SEED);
             (scene, city.occluders, &CITY_SHADOWS_SWEEPS)
         };
-        let rows = run_occluded(&scene, &occluders, cfg, sweeps)?;
+        let (rows, target) = run_occluded(&scene, &occluders, cfg, sweeps)?;
+        targets.push((name, target));
         let path = out.join(format!("error_vs_time_{name}.svg"));
         plot_scene(&path, &scene, &rows)?;
         println!("  plot: {}\n", path.display());
@@ -140,7 +142,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         Vec::new()
     };
 
-    print!("{}", summary(&records, &scaling));
+    print!("{}", summary(&records, &scaling, &targets));
     println!("\nTotal run time: {:.1} s", started.elapsed().as_secs_f64());
     Ok(())
 }

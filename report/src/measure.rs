@@ -172,6 +172,54 @@ pub fn measure(
     }
 }
 
+/// Two methods timed in alternating passes over the same points: robust to
+/// a machine whose load drifts during the run.
+#[derive(Clone, Copy, Debug)]
+pub struct Paired {
+    /// Median over the passes of the first method's seconds per point.
+    pub first: f64,
+    /// Median over the passes of the second method's seconds per point.
+    pub second: f64,
+    /// Median over the rounds of the second's pass time over the first's.
+    pub ratio: f64,
+    /// Rounds (one pass of each).
+    pub rounds: usize,
+}
+
+/// Times `rounds` rounds of one pass of `first` and one of `second` over
+/// every point index `0..points`, single-threaded.
+pub fn paired(
+    points: usize,
+    rounds: usize,
+    mut first: impl FnMut(usize) -> Sample,
+    mut second: impl FnMut(usize) -> Sample,
+) -> Paired {
+    let pass = |shade: &mut dyn FnMut(usize) -> Sample| {
+        let t = Instant::now();
+        for i in 0..points {
+            black_box(shade(black_box(i)));
+        }
+        t.elapsed().as_secs_f64() / points as f64
+    };
+    let (mut a, mut b, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..rounds {
+        let (x, y) = (pass(&mut first), pass(&mut second));
+        a.push(x);
+        b.push(y);
+        ratios.push(y / x);
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    Paired {
+        first: median(a),
+        second: median(b),
+        ratio: median(ratios),
+        rounds,
+    }
+}
+
 /// The methods compared by the report.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Method {

@@ -4,7 +4,7 @@
 //! the recipe for plugging a renderer's own ray tracer into the crate's
 //! `Visibility` trait.
 
-use glam::{DVec2, Vec3, Vec3A};
+use glam::{Vec2, Vec3, Vec3A};
 use manylights::{Aabb, Coverage, NodeRegion, Visibility};
 use obvhs::aabb::Aabb as BvhAabb;
 
@@ -19,13 +19,21 @@ pub const SHADOW_OFFSET: f32 = 0.05;
 
 /// Safety margin of the classifier, in scene units, for scenes whose
 /// coordinates stay below 1,000, where an `f32` ulp is at most `6.1e-5`.
-/// Every `f32` test here (the shadow ray's slab test, a shaft plane's dot
-/// product with a box corner, the corner segments' slab tests) errs by a few
-/// ulps of the coordinates, below `1e-3` in all. Occluders are grown by the
-/// margin before a shaft is declared to miss them and shrunk by it before
-/// one is said to block a node, so rounding cannot turn a conservative
-/// answer into a wrong one.
+/// Every `f32` test here (the shadow ray's slab test, the corner segments'
+/// slab tests, a shaft plane's dot product with a box corner, measured in
+/// units of the plane normal's 1-norm, by which its margin is scaled too)
+/// errs by a few ulps of the coordinates, below `1e-3` in all. Occluders are
+/// grown by the margin before a shaft is declared to miss them and shrunk
+/// by it before one is said to block a node, so rounding cannot turn a
+/// conservative answer into a wrong one.
 pub const MARGIN: f32 = 0.01;
+
+/// Boxes tried as the single occluder of a node: the first few that the
+/// segment to the centre of the node's box meets, in the BVH's traversal
+/// order (nearer child first). A blocker of a whole node is nearly always
+/// among them, and a long segment through foliage meets many boxes that
+/// cannot be one.
+pub const OCCLUDER_CANDIDATES: usize = 4;
 
 /// Points of a node's box that [`Shadows::visible_fraction`] casts a shadow
 /// ray to: the virtual light's position (the lights' intensity-weighted
@@ -52,41 +60,54 @@ pub const FRACTION_POINTS: [Vec3; 4] = [
 /// between a face turned towards `p` and one turned away); each such plane
 /// contains an axis and is found in the projection along it ([`Shaft`]).
 ///
-/// * [`Coverage::Visible`] when no occluder, grown by [`MARGIN`], meets the
-///   shaft's bounding box or all its planes: a box that lies wholly outside
-///   one half-space containing `H` meets no segment from `p` to `N`. The BVH
-///   is descended through the nodes whose bounds pass the same test (a node
-///   holds its boxes, so a node outside the shaft holds none inside it).
-///   Each plane's offset is the largest value over the hull's vertices (`p`
-///   and the corners of `N`) of the stored (rounded) normal's dot product,
-///   computed in `f64`: a rounded normal tilts the plane but never lets it
-///   cut into the shaft.
 /// * [`Coverage::Occluded`] when one occluder, shrunk by [`MARGIN`], meets
 ///   the segments from `p` to all eight corners of `N`. For a convex box `B`
 ///   the set `{q : [p, q] meets B} = {p + s (b - p) : b in B, s >= 1}` is
 ///   convex, so it then holds the corners' convex hull, `N`: every segment
 ///   from `p` to the node, so every light's shadow ray, passes at least
 ///   [`MARGIN`] deep through `B`, and [`Visibility::visible`] reports it
-///   blocked. Such a box also meets the segment to the centre of `N`, so only
-///   the boxes along that segment (an any-hit traversal of the BVH) are
-///   tried.
-/// * [`Coverage::Partial`] otherwise, which is always correct.
+///   blocked. Such a box also meets the segment to the centre of `N`, so the
+///   candidates are the first [`OCCLUDER_CANDIDATES`] boxes that an any-hit
+///   traversal of the BVH along that segment meets. This test runs first:
+///   it costs about one shadow ray, and most nodes the cut asks about in a
+///   city are hidden behind a single building.
+/// * [`Coverage::Visible`] when no occluder, grown by [`MARGIN`], meets the
+///   shaft's bounding box and all its planes: a box that lies wholly outside
+///   one half-space containing `H` meets no segment from `p` to `N`. The BVH
+///   is descended through the nodes whose bounds pass the same test (a node
+///   holds its boxes, so a node outside the shaft holds none inside it).
+///   Each plane's offset is the largest value over the hull's vertices (`p`
+///   and the corners of `N`) of the stored normal's dot product, so a
+///   rounded normal tilts the plane but never lets it cut into the shaft;
+///   the rounding of the dot products themselves is within [`MARGIN`]. With
+///   every face of `H` tested, a box is culled exactly when a face plane or
+///   an axis separates it from `H`: in the projection along each axis the
+///   test is the complete separating-axis test of a convex polygon and a
+///   rectangle, and those projections hold every separating axis of two
+///   convex bodies whose edges are axis-parallel or through `p`.
+/// * [`Coverage::Partial`] otherwise, which is always correct; without
+///   building the shaft when a box meets the segment to the centre of `N`
+///   (then the node is not visible).
 ///
 /// Both `Visible` and `Occluded` are therefore conservative with respect to
 /// this host's own [`Visibility::visible`], which is what the crate's
 /// certified bound needs (the contract of [`Visibility`]); the member's
 /// tests compare the classifier with rays to many points of random node
-/// boxes.
+/// boxes and to every light of the nodes the cut asks about.
 ///
 /// # Visible fraction
 ///
-/// A partially occluded node is estimated at the share of
-/// [`FRACTION_POINTS`] reached by a shadow ray: four rays per `Partial`
-/// answer. The fraction moves the estimate, never the certified interval
-/// `[0, upper]`; four rays keep the cost to that of refining the node by
-/// one level with a ray per light, about a third of what a classification
-/// costs, and are enough for a mean error well below the certified one
-/// (the report measures it).
+/// Off by default; [`Shadows::with_visible_fraction`] turns it on: a
+/// partially occluded node is then estimated at the share of
+/// [`FRACTION_POINTS`] (and the virtual light's position) that a shadow ray
+/// reaches, five rays per `Partial` answer. The fraction moves the estimate,
+/// never the certified interval `[0, upper]`, and the crate's cut asks for
+/// it right after a `Partial` answer, when that node's interval is the
+/// largest error in the cut: unless a budget stops the cut first, the node
+/// is refined next and its estimate is rarely used. Five rays per partial
+/// answer then only add cost (in the report's city at a certified 1%, 1.4
+/// times the time for the same errors), so the host casts them only when
+/// asked to, for renderers that shade with a budget.
 pub struct Shadows<'o> {
     occluders: &'o Occluders,
     /// `SHADOW_OFFSET` times the surface normal: queries start at the shading
@@ -96,6 +117,8 @@ pub struct Shadows<'o> {
     pub answers: [u32; 3],
     /// Shadow rays cast: point-to-point queries and the visible fraction's.
     pub rays: u32,
+    /// Whether [`Visibility::visible_fraction`] casts its rays.
+    fraction: bool,
 }
 
 impl<'o> Shadows<'o> {
@@ -106,7 +129,15 @@ impl<'o> Shadows<'o> {
             lift: normal * SHADOW_OFFSET,
             answers: [0; 3],
             rays: 0,
+            fraction: false,
         }
+    }
+
+    /// The same host with the visible fraction on (see "Visible fraction").
+    #[must_use]
+    pub fn with_visible_fraction(mut self) -> Self {
+        self.fraction = true;
+        self
     }
 
     /// Classifications answered.
@@ -129,30 +160,40 @@ impl<'o> Shadows<'o> {
     /// lifted here): see the type's documentation, "Classification".
     pub fn classify_box(&mut self, point: Vec3, target: &Aabb) -> Coverage {
         let apex = point + self.lift;
-        let shaft = Shaft::new(apex, target, MARGIN);
-        if !self
-            .occluders
-            .any_in(|b| shaft.meets(b), |b| shaft.meets(b))
-        {
-            return self.answer(Coverage::Visible);
-        }
+        // Occluded: a box that blocks every segment from the apex to the
+        // target meets the segment to its centre; the first few boxes along
+        // that segment are tried.
         let centre = 0.5 * (target.min + target.max);
         let to_centre = Segment::new(apex, centre);
         let mut to_corners: Option<[Segment; 8]> = None;
-        let blocks_all = |b: &BvhAabb| {
+        let (mut tried, mut occluded, mut centre_blocked) = (0, false, false);
+        self.occluders.any_along(apex, centre, |b| {
+            centre_blocked |= to_centre.hits(b);
             let core = BvhAabb::new(b.min + MARGIN, b.max - MARGIN);
-            core.valid()
-                && to_centre.hits(&core)
-                && to_corners
-                    .get_or_insert_with(|| corners(target).map(|c| Segment::new(apex, c)))
-                    .iter()
-                    .all(|s| s.hits(&core))
-        };
-        let occluded = self.occluders.any_along(apex, centre, blocks_all);
-        self.answer(if occluded {
-            Coverage::Occluded
-        } else {
+            if !(core.valid() && to_centre.hits(&core)) {
+                return false;
+            }
+            tried += 1;
+            occluded = to_corners
+                .get_or_insert_with(|| corners(target).map(|c| Segment::new(apex, c)))
+                .iter()
+                .all(|s| s.hits(&core));
+            occluded || tried == OCCLUDER_CANDIDATES
+        });
+        if occluded {
+            return self.answer(Coverage::Occluded);
+        }
+        if centre_blocked {
+            // A box meets one of the segments, so the node is not visible.
+            return self.answer(Coverage::Partial);
+        }
+        // Visible: no box meets the shaft.
+        let shaft = Shaft::new(apex, target, MARGIN);
+        let meets = |b: &BvhAabb| shaft.meets(b);
+        self.answer(if self.occluders.any_in(meets, meets) {
             Coverage::Partial
+        } else {
+            Coverage::Visible
         })
     }
 
@@ -175,9 +216,13 @@ impl Visibility for Shadows<'_> {
         self.ray(point + self.lift, light)
     }
 
-    /// The share of [`FRACTION_POINTS`] of the node's box (and its centroid)
-    /// that a shadow ray reaches: see the type's documentation.
+    /// With the fraction on, the share of [`FRACTION_POINTS`] of the node's
+    /// box (and its centroid) that a shadow ray reaches; `None` otherwise.
+    /// See the type's documentation, "Visible fraction".
     fn visible_fraction(&mut self, point: Vec3, node: &NodeRegion) -> Option<f32> {
+        if !self.fraction {
+            return None;
+        }
         let apex = point + self.lift;
         let centre = 0.5 * (node.aabb.min + node.aabb.max);
         let half = 0.5 * (node.aabb.max - node.aabb.min);
@@ -199,25 +244,21 @@ impl Counted for Shadows<'_> {
     }
 }
 
-/// Most planes a shaft from a point to a box has: two per pair of axes.
-const MAX_PLANES: usize = 6;
-
-/// A half-space `normal . x <= offset`, `normal` of unit length.
-#[derive(Clone, Copy, Debug, Default)]
-struct Plane {
-    normal: Vec3A,
-    offset: f32,
-}
+/// Most planes a shaft from a point to a box has: two per pair of axes;
+/// stored in lanes of eight (the unused ones hold every point) so that the
+/// box test vectorizes.
+const PLANE_LANES: usize = 8;
 
 /// The shaft from a point to a box, grown by a margin: its bounding box and
-/// the planes through the point and the box's silhouette edges (Haines and
-/// Wallace 1994; see [`Shadows`]).
+/// the half-spaces `normal . x <= offset` through the point and the box's
+/// silhouette edges (Haines and Wallace 1994; see [`Shadows`]), normals
+/// stored by component.
 #[derive(Clone, Copy, Debug)]
 pub struct Shaft {
     min: Vec3A,
     max: Vec3A,
-    planes: [Plane; MAX_PLANES],
-    count: usize,
+    normal: [[f32; PLANE_LANES]; 3],
+    offset: [f32; PLANE_LANES],
 }
 
 impl Shaft {
@@ -225,56 +266,53 @@ impl Shaft {
     /// (so that a box grown by `margin` on every side meets the grown shaft
     /// whenever it meets the shaft).
     pub fn new(apex: Vec3, target: &Aabb, margin: f32) -> Shaft {
-        let (lo, hi) = (target.min.min(apex), target.max.max(apex));
         let mut shaft = Shaft {
-            min: Vec3A::from(lo) - margin,
-            max: Vec3A::from(hi) + margin,
-            planes: [Plane::default(); MAX_PLANES],
-            count: 0,
+            min: Vec3A::from(target.min.min(apex)) - margin,
+            max: Vec3A::from(target.max.max(apex)) + margin,
+            normal: [[0.0; PLANE_LANES]; 3],
+            offset: [f32::INFINITY; PLANE_LANES],
         };
-        let p = apex.as_dvec3();
-        let (min, max) = (target.min.as_dvec3(), target.max.as_dvec3());
+        let mut count = 0;
         for (i, j) in [(0, 1), (1, 2), (2, 0)] {
-            let q = DVec2::new(p[i], p[j]);
-            let rect = [
-                DVec2::new(min[i], min[j]),
-                DVec2::new(max[i], min[j]),
-                DVec2::new(min[i], max[j]),
-                DVec2::new(max[i], max[j]),
-            ];
-            for (k, c) in rect.iter().enumerate() {
-                // The face of the rectangle on the corner's side of axis i
-                // (j) is turned towards the point when the point lies
-                // strictly beyond it.
-                let towards_i = if k & 1 == 0 { q.x < c.x } else { q.x > c.x };
-                let towards_j = if k & 2 == 0 { q.y < c.y } else { q.y > c.y };
+            // The projection along the third axis: the point q and the
+            // rectangle [lo, hi].
+            let q = Vec2::new(apex[i], apex[j]);
+            let lo = Vec2::new(target.min[i], target.min[j]);
+            let hi = Vec2::new(target.max[i], target.max[j]);
+            let (below, above) = (q.cmplt(lo), q.cmpgt(hi));
+            if !(below | above).any() {
+                continue; // q projects into the rectangle: no silhouette
+            }
+            let rect = [lo, Vec2::new(hi.x, lo.y), Vec2::new(lo.x, hi.y), hi];
+            let centre = 0.5 * (lo + hi);
+            for (k, &c) in rect.iter().enumerate() {
+                // A side of the rectangle is turned towards q when q lies
+                // strictly beyond it; a corner between a side turned towards
+                // q and one turned away is on the silhouette.
+                let towards_i = if k & 1 == 0 { below.x } else { above.x };
+                let towards_j = if k & 2 == 0 { below.y } else { above.y };
                 if towards_i == towards_j {
-                    continue; // not a silhouette corner
+                    continue;
                 }
-                let u = *c - q;
-                let mut n = DVec2::new(u.y, -u.x);
-                // The rectangle lies on one side of the line through q and
-                // its silhouette corner: make that side the inside.
-                let side: f64 = rect.iter().map(|r| n.dot(*r - q)).sum();
-                if side == 0.0 {
-                    continue; // degenerate rectangle on the line: no plane
+                // A normal of the line through q and c (of any length: the
+                // half-plane, its margin and the box test scale alike).
+                let u = c - q;
+                let mut n = Vec2::new(u.y, -u.x);
+                if n == Vec2::ZERO {
+                    continue; // q on the corner: no line through both
                 }
-                if side > 0.0 {
-                    n = -n;
+                if n.dot(centre - q) > 0.0 {
+                    n = -n; // the rectangle's side is the inside
                 }
-                n = n.normalize();
-                let mut normal = Vec3A::ZERO;
-                normal[i] = n.x as f32;
-                normal[j] = n.y as f32;
-                let stored = (f64::from(normal[i]), f64::from(normal[j]));
-                let dot = |v: DVec2| stored.0 * v.x + stored.1 * v.y;
-                let reach = rect.iter().map(|r| dot(*r)).fold(dot(q), f64::max);
-                let slack = f64::from(margin) * (stored.0.abs() + stored.1.abs());
-                shaft.planes[shaft.count] = Plane {
-                    normal,
-                    offset: (reach + slack) as f32,
-                };
-                shaft.count += 1;
+                // The half-plane's offset is the largest value over q and
+                // the corners, so that it holds the whole projected hull
+                // whatever the normal's rounding.
+                let reach = rect.iter().map(|r| n.dot(*r)).fold(n.dot(q), f32::max);
+                debug_assert!(count < 6, "two silhouette corners per projection");
+                shaft.normal[i][count] = n.x;
+                shaft.normal[j][count] = n.y;
+                shaft.offset[count] = reach + margin * (n.x.abs() + n.y.abs());
+                count += 1;
             }
         }
         shaft
@@ -287,9 +325,18 @@ impl Shaft {
         if (b.min.cmpgt(self.max) | b.max.cmplt(self.min)).any() {
             return false;
         }
-        self.planes[..self.count].iter().all(|plane| {
-            let nearest = Vec3A::select(plane.normal.cmpge(Vec3A::ZERO), b.min, b.max);
-            plane.normal.dot(nearest) <= plane.offset
-        })
+        // The smallest `normal . x` over the box, per plane: each term's
+        // smaller value over the box's extent along its axis.
+        let (lo, hi) = (b.min.to_array(), b.max.to_array());
+        let mut beyond = [false; PLANE_LANES];
+        for k in 0..PLANE_LANES {
+            let mut sum = 0.0;
+            for axis in 0..3 {
+                let n = self.normal[axis][k];
+                sum += (n * lo[axis]).min(n * hi[axis]);
+            }
+            beyond[k] = sum > self.offset[k];
+        }
+        !beyond.iter().any(|&x| x)
     }
 }
