@@ -1,13 +1,14 @@
 //! The night city with shadows: the buildings occlude. A smaller city than
 //! the `city` example's (20,000 lights), since the exact shadowed sum casts
-//! one shadow ray per light and pixel (about a minute on two cores).
+//! one shadow ray per light and pixel (about two minutes on two cores).
 //!
-//! The tree asks the host's conservative Warnock-style classifier
-//! ([`Shadows`]) whether a node is visible, occluded or partly so, and casts
-//! shadow rays only where it must; the exact shadowed sum casts one per
-//! light. The example prints the table of `city` plus the visibility
-//! queries, writes the images, and checks the certified bound at every
-//! pixel.
+//! The buildings sit in a BVH of the `obvhs` crate. The tree asks the
+//! host ([`Shadows`]) whether a node is visible, occluded or partly so, a
+//! conservative shaft test against that BVH (Haines and Wallace 1994), and
+//! casts any-hit shadow rays only where it must; the exact shadowed sum
+//! casts one per light. The example prints the table of `city` plus the
+//! visibility queries, writes the images, and checks the certified bound at
+//! every pixel.
 //!
 //! ```text
 //! cargo run --release --example shadows

@@ -65,15 +65,15 @@ pub const CITY_SHADOWS_SWEEPS: OccludedSweeps = OccludedSweeps {
 
 /// The canopy: every shadow ray costs a traversal of a deep BVH, so only
 /// the configurations around 1% are run (Monte Carlo does not reach 1% in
-/// the city either), each with four times the budget so that a pass over
-/// the points (about a third of a second) is repeated a few times.
+/// the city either), each with three times the budget so that a pass over
+/// the points (about a third of a second) is repeated.
 pub const CANOPY_SWEEPS: OccludedSweeps = OccludedSweeps {
-    relative: &[0.1, 0.03, 0.01],
+    relative: &[0.03, 0.01],
     absolute: &[],
     per_node: &[],
     samples: &[],
     ward: &[0.03, 0.01],
-    budget_factor: 4,
+    budget_factor: 3,
 };
 
 /// The error level the summary compares methods at.
