@@ -100,6 +100,7 @@ pub const BUILD_REPEAT_BELOW: usize = 100_000;
 pub const BUILD_REPEATS: usize = 5;
 
 /// Sizes and budgets of one run.
+#[derive(Clone, Copy, Debug)]
 pub struct Config {
     /// Shading points per scene.
     pub points: usize,

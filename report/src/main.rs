@@ -6,12 +6,14 @@
 //! cargo run --release -p manylights-report -- --quick         # smoke run, seconds
 //! cargo run --release -p manylights-report -- city scaling    # only some parts
 //! cargo run --release -p manylights-report -- shadows         # the occluded scenes alone
+//! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
 //! ```
 //!
 //! Parts: `evaluations` (the ground scene's evaluations per point), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
 //! `city-shadows` and `canopy` (the occluded scenes; `shadows` names both)
-//! and `scaling` (time against number of lights); no part named means all. Writes to `out/report/` under the
+//! and `scaling` (time against number of lights); no part named means all.
+//! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
 //! repository root:
 //!
 //! * `errors.csv`, one row per scene and configuration (in occluded scenes
@@ -52,10 +54,16 @@ const EVALUATIONS: &str = "evaluations";
 fn main() -> Result<(), Box<dyn Error>> {
     let started = Instant::now();
     let mut quick = false;
+    let mut shadow_lights = None;
     let mut parts = Vec::new();
-    for arg in std::env::args().skip(1) {
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
         match arg.as_str() {
             "--quick" => quick = true,
+            "--shadow-lights" => {
+                let n = args.next().and_then(|n| n.parse().ok());
+                shadow_lights = Some(n.ok_or("--shadow-lights needs a number of lights")?);
+            }
             SHADOWS => parts.extend(OCCLUDED_NAMES.map(String::from)),
             name if SCENE_NAMES.contains(&name)
                 || OCCLUDED_NAMES.contains(&name)
@@ -65,8 +73,8 @@ fn main() -> Result<(), Box<dyn Error>> {
             }
             _ => {
                 return Err(format!(
-                    "unknown argument {arg:?}; usage: report [--quick] [{EVALUATIONS} | {} | \
-                     {} | {SHADOWS} | {SCALING}]...",
+                    "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
+                     [{EVALUATIONS} | {} | {} | {SHADOWS} | {SCALING}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -75,7 +83,11 @@ fn main() -> Result<(), Box<dyn Error>> {
         }
     }
     let wanted = |part: &str| parts.is_empty() || parts.iter().any(|p| p == part);
-    let cfg = if quick { &QUICK } else { &FULL };
+    let mut cfg = if quick { QUICK } else { FULL };
+    if let Some(n) = shadow_lights {
+        cfg.shadow_lights = n;
+    }
+    let cfg = &cfg;
     let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("../out/report");
     fs::create_dir_all(&out)?;
 
