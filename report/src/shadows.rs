@@ -329,13 +329,13 @@ impl Shaft {
         // smaller value over the box's extent along its axis.
         let (lo, hi) = (b.min.to_array(), b.max.to_array());
         let mut beyond = [false; PLANE_LANES];
-        for k in 0..PLANE_LANES {
+        for (k, out) in beyond.iter_mut().enumerate() {
             let mut sum = 0.0;
             for axis in 0..3 {
                 let n = self.normal[axis][k];
                 sum += (n * lo[axis]).min(n * hi[axis]);
             }
-            beyond[k] = sum > self.offset[k];
+            *out = sum > self.offset[k];
         }
         !beyond.iter().any(|&x| x)
     }
