@@ -244,9 +244,9 @@ impl Counted for Shadows<'_> {
     }
 }
 
-/// Most planes a shaft from a point to a box has: two per pair of axes;
-/// stored in lanes of eight (the unused ones hold every point) so that the
-/// box test vectorizes.
+/// Lanes of a shaft's planes. A shaft from a point to a box has at most six
+/// planes, two per projection; they are stored in eight lanes (the unused
+/// ones hold every point) so that the box test vectorizes.
 const PLANE_LANES: usize = 8;
 
 /// The shaft from a point to a box, grown by a margin: its bounding box and
