@@ -1,13 +1,14 @@
 //! The night city with shadows: the buildings occlude. A smaller city than
 //! the `city` example's (20,000 lights), since the exact shadowed sum casts
-//! one shadow ray per light and pixel (about a minute on two cores).
+//! one shadow ray per light and pixel (about two minutes on two cores).
 //!
-//! The tree asks the host's conservative Warnock-style classifier
-//! ([`Shadows`]) whether a node is visible, occluded or partly so, and casts
-//! shadow rays only where it must; the exact shadowed sum casts one per
-//! light. The example prints the table of `city` plus the visibility
-//! queries, writes the images, and checks the certified bound at every
-//! pixel.
+//! The buildings sit in a BVH of the `obvhs` crate. The tree asks the
+//! host ([`Shadows`]) whether a node is visible, occluded or partly so, a
+//! conservative shaft test against that BVH (Haines and Wallace 1994), and
+//! casts any-hit shadow rays only where it must; the exact shadowed sum
+//! casts one per light. The example prints the table of `city` plus the
+//! visibility queries, writes the images, and checks the certified bound at
+//! every pixel.
 //!
 //! ```text
 //! cargo run --release --example shadows
@@ -40,13 +41,13 @@ fn main() -> Result<(), Box<dyn Error>> {
     // Each pixel's host counts its answers.
     let threshold = Threshold::relative(options.threshold);
     let (shaded, tree_time) = view.shade(|s, hit| {
-        let mut host = Shadows::new(&view.city, hit.normal);
+        let mut host = Shadows::new(&view.city.occluders, hit.normal);
         let r = s.shade_query(&Query::new(hit.point, hit.normal)?, threshold, &mut host)?;
         Ok((r, host.answers))
     })?;
     let results: Vec<Option<ShadeResult>> = shaded.iter().map(|s| s.map(|s| s.0)).collect();
     let (exact, exact_time) = view.shade(|s, hit| {
-        let host = Shadows::new(&view.city, hit.normal);
+        let host = Shadows::new(&view.city.occluders, hit.normal);
         Ok(s.exact_query(&Query::new(hit.point, hit.normal)?, host))
     })?;
 

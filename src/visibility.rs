@@ -54,6 +54,36 @@ pub struct NodeRegion {
 /// A host that answers non-conservatively gets estimates, not certified
 /// bounds. The methods take `&mut self` so a host can keep per-thread ray
 /// caches or counters.
+///
+/// # Plugging in a ray tracer
+///
+/// A renderer makes one host per shading point from its own acceleration
+/// structure. The repository's benchmark member, `manylights-report`,
+/// does so in its `shadows` module over the `obvhs` BVH crate, and is the
+/// recipe to copy; in words:
+///
+/// * [`visible`](Self::visible) is the renderer's any-hit shadow ray, from
+///   the point (offset off its surface) to the light; the same function
+///   defines the exact shadowed sum the bound is certified against.
+/// * [`classify`](Self::classify) is a conservative shaft test (Haines and
+///   Wallace 1994, "Shaft culling for efficient ray-traced radiosity")
+///   between the point and the node's box. `Occluded` when one opaque
+///   occluder, shrunk by a rounding margin, meets the segments from the
+///   point to all eight corners of the box (the set of points whose segment
+///   meets a convex occluder is convex, so the whole box is hidden); the
+///   candidates are the first few occluders along the segment to the box's
+///   centre. `Visible` when no occluder, grown by the margin, meets the
+///   shaft: the bounding box of the point and the box cut by the planes
+///   through the point and the box's silhouette edges, each found in the
+///   projection along one axis. `Partial` otherwise, and at once when an
+///   occluder meets the segment to the centre.
+/// * A classification costs a few shadow rays, so the cut asks only about
+///   nodes it takes, and stops asking in a call where small nodes keep
+///   answering `Partial` (foliage, lattices); then every light it needs is
+///   asked point-to-point, about one shadow ray per light.
+/// * [`visible_fraction`](Self::visible_fraction) is worth its rays only
+///   when partial nodes stay in the cut, that is when a budget stops it:
+///   the cut refines a partial node right after asking about it.
 pub trait Visibility {
     /// `true` for a host that never reports occlusion; the cut then skips
     /// every visibility call at compile time. Leave it `false`.

@@ -1,19 +1,34 @@
-//! Axis-aligned boxes and a bounding-volume hierarchy over them: the ray
-//! casting of the night city and of its shadow rays.
+//! Opaque axis-aligned boxes in a bounding-volume hierarchy from the `obvhs`
+//! crate (a binary BVH, [`Bvh2`], built with PLOC and reinsertion, as
+//! renderers build theirs): the nearest hits of primary rays, any-hit shadow
+//! segments, and the two traversals a shaft test needs. Small box helpers
+//! live here too.
 
-use glam::Vec3;
+use std::time::Duration;
+
+use glam::{Vec3, Vec3A};
 use manylights::Aabb;
+use obvhs::BvhBuildParams;
+use obvhs::aabb::Aabb as BvhAabb;
+use obvhs::bvh2::Bvh2;
+use obvhs::bvh2::builder::build_bvh2;
+use obvhs::bvh2::node::Bvh2Node;
+use obvhs::fast_stack;
+use obvhs::faststack::FastStack;
+use obvhs::ray::{Ray, RayHit};
 
 /// Parameter interval `(near, far)` over which `origin + t * dir` lies in the
-/// closed box `b` (empty when `near > far`), from `inv_dir = 1 / dir`.
+/// closed box `[min, max]` (empty when `near > far`), from `inv_dir = 1 /
+/// dir`.
 ///
 /// A zero direction component makes `inv_dir` infinite, which the slab
 /// arithmetic handles, except for an origin exactly in the plane of a face
 /// parallel to the ray: there `0 * inf = NaN`, `f32::min` / `f32::max` keep
 /// the infinite lane, and the ray (grazing the face in its plane) misses.
-pub fn slab(origin: Vec3, inv_dir: Vec3, b: &Aabb) -> (f32, f32) {
-    let t0 = (b.min - origin) * inv_dir;
-    let t1 = (b.max - origin) * inv_dir;
+#[inline]
+pub fn slab(origin: Vec3A, inv_dir: Vec3A, min: Vec3A, max: Vec3A) -> (f32, f32) {
+    let t0 = (min - origin) * inv_dir;
+    let t1 = (max - origin) * inv_dir;
     (t0.min(t1).max_element(), t0.max(t1).min_element())
 }
 
@@ -34,109 +49,189 @@ pub fn entry_normal(origin: Vec3, inv_dir: Vec3, b: &Aabb, dir: Vec3) -> Vec3 {
     normal
 }
 
-/// Largest number of boxes in a BVH leaf.
-const BVH_LEAF_SIZE: usize = 4;
-/// Traversal stack depth: median splits give depth `log2(boxes / leaf) + 1`,
-/// so 64 covers any box count that fits in memory.
-const BVH_STACK: usize = 64;
-
-/// A node of [`Bvh`]: a leaf holds `count > 0` boxes from `start` in
-/// `Bvh::items`; an inner node (`count == 0`) has its first child right after
-/// it and its second at `start`.
+/// A closed segment, set up for slab tests.
 #[derive(Clone, Copy, Debug)]
-struct BvhNode {
-    bounds: Aabb,
-    start: u32,
-    count: u32,
+pub struct Segment {
+    /// Start point.
+    pub from: Vec3A,
+    /// `1 / (to - from)`.
+    pub inv_dir: Vec3A,
 }
 
-/// A bounding-volume hierarchy over boxes, split at the median of the longest
-/// axis of the centres.
-pub struct Bvh {
-    nodes: Vec<BvhNode>,
-    items: Vec<u32>,
-}
-
-impl Bvh {
-    /// Builds the hierarchy over `boxes` (referred to by index).
-    pub fn new(boxes: &[Aabb]) -> Bvh {
-        let mut bvh = Bvh {
-            nodes: Vec::with_capacity(2 * boxes.len() / BVH_LEAF_SIZE + 1),
-            items: (0..boxes.len() as u32).collect(),
-        };
-        if !boxes.is_empty() {
-            bvh.split(boxes, 0, boxes.len());
+impl Segment {
+    /// The segment from `from` to `to`.
+    #[inline]
+    pub fn new(from: Vec3, to: Vec3) -> Self {
+        Self {
+            from: from.into(),
+            inv_dir: (Vec3A::from(to) - Vec3A::from(from)).recip(),
         }
-        bvh
     }
 
-    fn split(&mut self, boxes: &[Aabb], start: usize, end: usize) -> usize {
-        let items = &mut self.items[start..end];
-        let bounds = items
+    /// Whether the segment meets the closed box `b`.
+    #[inline]
+    pub fn hits(&self, b: &BvhAabb) -> bool {
+        let (near, far) = slab(self.from, self.inv_dir, b.min, b.max);
+        near <= far && far >= 0.0 && near <= 1.0
+    }
+}
+
+/// Opaque boxes and a BVH over them.
+///
+/// The boxes are stored in the BVH's leaf order, so that a leaf's range of
+/// primitive slots is a range of boxes; [`Occluders::id`] gives a slot's
+/// index in the input.
+#[derive(Clone)]
+pub struct Occluders {
+    boxes: Vec<BvhAabb>,
+    ids: Vec<u32>,
+    bvh: Bvh2,
+    /// Depth of the BVH: the traversal stack [`Occluders::any_in`] needs.
+    depth: usize,
+}
+
+impl Occluders {
+    /// The boxes `boxes` (referred to by their index) in a BVH built with
+    /// `obvhs`'s medium preset (up to 8 boxes a leaf).
+    pub fn new(boxes: &[Aabb]) -> Self {
+        let input: Vec<BvhAabb> = boxes
             .iter()
-            .map(|&i| boxes[i as usize])
-            .reduce(union)
-            .expect("split of an empty range");
-        let index = self.nodes.len();
-        self.nodes.push(BvhNode {
-            bounds,
-            start: start as u32,
-            count: items.len() as u32,
-        });
-        if items.len() <= BVH_LEAF_SIZE {
-            return index;
+            .map(|b| BvhAabb::new(b.min.into(), b.max.into()))
+            .collect();
+        if input.is_empty() {
+            return Self {
+                boxes: Vec::new(),
+                ids: Vec::new(),
+                bvh: Bvh2::default(),
+                depth: 0,
+            };
         }
-        let centre = |i: &u32| boxes[*i as usize].min + boxes[*i as usize].max;
-        let extent = bounds.max - bounds.min;
-        let axis = if extent.x >= extent.y && extent.x >= extent.z {
-            0
-        } else if extent.y >= extent.z {
-            1
-        } else {
-            2
-        };
-        let mid = items.len() / 2;
-        items.select_nth_unstable_by(mid, |a, b| centre(a)[axis].total_cmp(&centre(b)[axis]));
-        self.split(boxes, start, start + mid);
-        let second = self.split(boxes, start + mid, end);
-        self.nodes[index].start = second as u32;
-        self.nodes[index].count = 0;
-        index
+        let mut bvh = build_bvh2(
+            &input,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        let ids = std::mem::take(&mut bvh.primitive_indices);
+        // Leaves now index the reordered boxes directly.
+        bvh.primitive_indices = (0..ids.len() as u32).collect();
+        Self {
+            boxes: ids.iter().map(|&i| input[i as usize]).collect(),
+            ids,
+            depth: bvh.depth(0),
+            bvh,
+        }
     }
 
-    /// Depth-first search: descends into every node whose box passes `enter`
-    /// and calls `visit` on each box index of the leaves reached, until
-    /// `visit` returns `true` (then `any` returns `true`).
-    pub fn any(
+    /// Number of boxes.
+    pub fn len(&self) -> usize {
+        self.boxes.len()
+    }
+
+    /// Whether there are no boxes.
+    pub fn is_empty(&self) -> bool {
+        self.boxes.is_empty()
+    }
+
+    /// The input index of the box in slot `slot`.
+    pub fn id(&self, slot: usize) -> usize {
+        self.ids[slot] as usize
+    }
+
+    /// The box in slot `slot`.
+    pub fn get(&self, slot: usize) -> &BvhAabb {
+        &self.boxes[slot]
+    }
+
+    /// Whether some box meets the closed segment `[from, to]`: an any-hit
+    /// query (the traversal stops at the first box hit).
+    #[inline]
+    pub fn blocked(&self, from: Vec3, to: Vec3) -> bool {
+        let segment = Segment::new(from, to);
+        self.any_along(from, to, |b| segment.hits(b))
+    }
+
+    /// Whether `test` holds for some box in a leaf whose bounds the segment
+    /// from `from` to `to` meets; stops at the first. `test` decides about
+    /// the box itself (the BVH only prunes).
+    #[inline]
+    pub fn any_along(&self, from: Vec3, to: Vec3, mut test: impl FnMut(&BvhAabb) -> bool) -> bool {
+        let ray = Ray::new(from.into(), Vec3A::from(to) - Vec3A::from(from), 0.0, 1.0);
+        let boxes = &self.boxes;
+        let missed = self.bvh.ray_traverse_miss(ray, |_, slot| {
+            if test(&boxes[slot]) {
+                0.0
+            } else {
+                f32::INFINITY
+            }
+        });
+        !missed
+    }
+
+    /// The nearest box the ray `origin + t * dir` enters at some `t > 0`: `t`
+    /// and the box's input index.
+    pub fn nearest(&self, origin: Vec3, dir: Vec3) -> Option<(f32, usize)> {
+        let ray = Ray::new_inf(origin.into(), dir.into());
+        let (origin, inv_dir) = (Vec3A::from(origin), Vec3A::from(dir.recip()));
+        let boxes = &self.boxes;
+        let mut hit = RayHit::none();
+        let found = self.bvh.ray_traverse(ray, &mut hit, |_, slot| {
+            let b = &boxes[slot];
+            let (near, far) = slab(origin, inv_dir, b.min, b.max);
+            if near <= far && near > 0.0 {
+                near
+            } else {
+                f32::INFINITY
+            }
+        });
+        found.then(|| (hit.t, self.id(hit.primitive_id as usize)))
+    }
+
+    /// Depth-first search: descends into every BVH node whose bounds pass
+    /// `enter` and calls `visit` on each box of the leaves reached, until
+    /// `visit` returns `true` (then `any_in` returns `true`). `enter` must
+    /// hold for a node's bounds whenever it may hold for a box inside them.
+    #[inline]
+    pub fn any_in(
         &self,
-        mut enter: impl FnMut(&Aabb) -> bool,
-        mut visit: impl FnMut(usize) -> bool,
+        mut enter: impl FnMut(&BvhAabb) -> bool,
+        mut visit: impl FnMut(&BvhAabb) -> bool,
     ) -> bool {
-        if self.nodes.is_empty() {
+        let nodes = &self.bvh.nodes;
+        let Some(root) = nodes.first() else {
+            return false;
+        };
+        if !enter(root.aabb()) {
             return false;
         }
-        let mut stack = [0u32; BVH_STACK];
-        let mut top = 1;
-        while top > 0 {
-            top -= 1;
-            let index = stack[top];
-            let node = &self.nodes[index as usize];
-            if !enter(&node.bounds) {
-                continue;
-            }
-            if node.count > 0 {
-                let leaf = &self.items[node.start as usize..(node.start + node.count) as usize];
-                if leaf.iter().any(|&i| visit(i as usize)) {
-                    return true;
-                }
-            } else {
-                // The first child is popped first.
-                stack[top] = node.start;
-                stack[top + 1] = index + 1;
-                top += 2;
-            }
+        let boxes = |node: &Bvh2Node| {
+            &self.boxes[node.first_index as usize..(node.first_index + node.prim_count) as usize]
+        };
+        if root.is_leaf() {
+            return boxes(root).iter().any(visit);
         }
-        false
+        let mut found = false;
+        // A stack as deep as the tree (obvhs sizes its own for the deepest
+        // tree it expects, 96 entries or more, and clears it per call).
+        fast_stack!(u32, (16, 32, 64, 128), self.depth + 1, stack, {
+            // Inner nodes keep their two children side by side; the stack
+            // holds the index of the first of a pair.
+            stack.push(root.first_index);
+            'pairs: while let Some(first) = stack.pop() {
+                for index in [first, first + 1] {
+                    let node = &nodes[index as usize];
+                    if !enter(node.aabb()) {
+                        continue;
+                    }
+                    if !node.is_leaf() {
+                        stack.push(node.first_index);
+                    } else if boxes(node).iter().any(&mut visit) {
+                        found = true;
+                        break 'pairs;
+                    }
+                }
+            }
+        });
+        found
     }
 }
 
@@ -145,30 +240,6 @@ pub fn union(a: Aabb, b: Aabb) -> Aabb {
     Aabb {
         min: a.min.min(b.min),
         max: a.max.max(b.max),
-    }
-}
-
-/// A closed segment, set up for slab tests.
-pub struct Segment {
-    /// Start point.
-    pub from: Vec3,
-    /// `1 / (to - from)`.
-    pub inv_dir: Vec3,
-}
-
-impl Segment {
-    /// The segment from `from` to `to`.
-    pub fn new(from: Vec3, to: Vec3) -> Self {
-        Self {
-            from,
-            inv_dir: (to - from).recip(),
-        }
-    }
-
-    /// Whether the segment meets the closed box `b`.
-    pub fn hits(&self, b: &Aabb) -> bool {
-        let (near, far) = slab(self.from, self.inv_dir, b);
-        near <= far && far >= 0.0 && near <= 1.0
     }
 }
 

@@ -3,14 +3,17 @@
 //!
 //! * [`scenes`]: every procedural scene, generated from a seed with `rand`.
 //! * Rendering helpers of the examples: [`camera`], [`raycast`] (primary
-//!   rays through the night city), [`bvh`], [`shadows`] (the night city's
-//!   visibility host), [`image`] (PNG output), [`compare`] (the certified
-//!   check, error statistics and the printed table), [`options`].
+//!   rays through the night city), [`bvh`] (opaque boxes in an `obvhs`
+//!   BVH), [`shadows`] (the visibility host of the scenes with occluders: a
+//!   shaft classifier and any-hit shadow rays, the recipe for plugging a
+//!   ray tracer into the crate), [`image`] (PNG output), [`compare`] (the
+//!   certified check, error statistics and the printed table), [`options`].
 //! * The report (binary `report`): the baselines [`exact`] (the exact sum,
 //!   vectorized), [`sampling`] (Monte Carlo light sampling after Shirley et
 //!   al. 1996 and Conty & Kulla 2018) and [`shadowed`] (the exact shadowed
 //!   sum and Ward 1991); [`measure`], the sweeps ([`config`], [`sweep`],
-//!   [`occluded`], [`scaling`]), [`plot`], [`csv`], [`summary`], and the
+//!   [`occluded`] for the night city with shadows and the canopy,
+//!   [`scaling`]), [`plot`], [`csv`], [`summary`], and the
 //!   ground scene's evaluations-per-point table ([`evaluations`]).
 
 pub mod bounds;

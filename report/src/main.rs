@@ -5,14 +5,17 @@
 //! cargo run --release -p manylights-report                    # full report, about a minute on 2 cores
 //! cargo run --release -p manylights-report -- --quick         # smoke run, seconds
 //! cargo run --release -p manylights-report -- city scaling    # only some parts
+//! cargo run --release -p manylights-report -- shadows         # the occluded scenes alone
+//! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
 //! ```
 //!
 //! Parts: `evaluations` (the ground scene's evaluations per point), `bounds`
 //! (the Lambert bounds on the coloured street city, with build time and
 //! memory), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
-//! `city-shadows` (the occluded scene) and `scaling` (time against number of
-//! lights); no part named means all. Writes to `out/report/` under the
+//! `city-shadows` and `canopy` (the occluded scenes; `shadows` names both)
+//! and `scaling` (time against number of lights); no part named means all.
+//! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
 //! repository root:
 //!
 //! * `errors.csv`, one row per scene and configuration (in occluded scenes
@@ -34,8 +37,9 @@ use std::time::Instant;
 
 use manylights_report::bounds::print_bounds_table;
 use manylights_report::config::{
-    self, FULL, OCCLUDED, PAPER_RELATIVE, PER_NODE, QUICK, SAMPLE_COUNTS, SCALING, SCENE_NAMES,
-    SEED, SHADOW_PER_NODE, SHADOW_RELATIVE, TREE_ABSOLUTE, TREE_RELATIVE, WARD,
+    self, CANOPY, CANOPY_SWEEPS, CITY_SHADOWS_SWEEPS, FULL, OCCLUDED_NAMES, PAPER_RELATIVE,
+    PER_NODE, QUICK, SAMPLE_COUNTS, SCALING, SCENE_NAMES, SEED, SHADOW_PER_NODE, SHADOW_RELATIVE,
+    SHADOWS, TREE_ABSOLUTE, TREE_RELATIVE, WARD,
 };
 use manylights_report::csv::{write_csv, write_scaling_csv};
 use manylights_report::evaluations::print_evaluations_table;
@@ -43,7 +47,7 @@ use manylights_report::measure::MAX_PASSES;
 use manylights_report::occluded::run_occluded;
 use manylights_report::plot::{plot_scaling, plot_scene};
 use manylights_report::scaling::run_scaling;
-use manylights_report::scenes::city_shadows;
+use manylights_report::scenes::{canopy, city_shadows};
 use manylights_report::summary::summary;
 use manylights_report::sweep::run_scene;
 
@@ -55,27 +59,40 @@ const BOUNDS: &str = "bounds";
 fn main() -> Result<(), Box<dyn Error>> {
     let started = Instant::now();
     let mut quick = false;
+    let mut shadow_lights = None;
     let mut parts = Vec::new();
-    for arg in std::env::args().skip(1) {
+    let mut args = std::env::args().skip(1);
+    while let Some(arg) = args.next() {
         match arg.as_str() {
             "--quick" => quick = true,
+            "--shadow-lights" => {
+                let n = args.next().and_then(|n| n.parse().ok());
+                shadow_lights = Some(n.ok_or("--shadow-lights needs a number of lights")?);
+            }
+            SHADOWS => parts.extend(OCCLUDED_NAMES.map(String::from)),
             name if SCENE_NAMES.contains(&name)
-                || [EVALUATIONS, BOUNDS, OCCLUDED, SCALING].contains(&name) =>
+                || OCCLUDED_NAMES.contains(&name)
+                || [EVALUATIONS, BOUNDS, SCALING].contains(&name) =>
             {
                 parts.push(arg)
             }
             _ => {
                 return Err(format!(
-                    "unknown argument {arg:?}; usage: report [--quick] [{EVALUATIONS} | {BOUNDS} | \
-                     {} | {OCCLUDED} | {SCALING}]...",
-                    SCENE_NAMES.join(" | ")
+                    "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
+                     [{EVALUATIONS} | {BOUNDS} | {} | {} | {SHADOWS} | {SCALING}]...",
+                    SCENE_NAMES.join(" | "),
+                    OCCLUDED_NAMES.join(" | ")
                 )
                 .into());
             }
         }
     }
     let wanted = |part: &str| parts.is_empty() || parts.iter().any(|p| p == part);
-    let cfg = if quick { &QUICK } else { &FULL };
+    let mut cfg = if quick { QUICK } else { FULL };
+    if let Some(n) = shadow_lights {
+        cfg.shadow_lights = n;
+    }
+    let cfg = &cfg;
     let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("../out/report");
     fs::create_dir_all(&out)?;
 
@@ -99,13 +116,15 @@ fn main() -> Result<(), Box<dyn Error>> {
     println!(
         "Shading points per scene: {}. Threshold sweeps: tight bound relative {TREE_RELATIVE:?} and \
          absolute {TREE_ABSOLUTE:?} x median radiance; paper's bound relative {PAPER_RELATIVE:?}; \
-         per-node {PER_NODE:?}; Monte Carlo samples {SAMPLE_COUNTS:?}. Occluded scene: tight \
+         per-node {PER_NODE:?}; Monte Carlo samples {SAMPLE_COUNTS:?}. Occluded city: tight \
          bound relative {SHADOW_RELATIVE:?} and absolute {TREE_ABSOLUTE:?} x median radiance; \
-         per-node {SHADOW_PER_NODE:?}; Monte Carlo samples {SAMPLE_COUNTS:?}; Ward {WARD:?}.\n",
-        cfg.points
+         per-node {SHADOW_PER_NODE:?}; Monte Carlo samples {SAMPLE_COUNTS:?}; Ward {WARD:?}. \
+         Canopy ({} points): tight bound relative {:?}; Ward {:?}.\n",
+        cfg.points, cfg.canopy_points, CANOPY_SWEEPS.relative, CANOPY_SWEEPS.ward
     );
 
     let mut records = Vec::new();
+    let mut targets = Vec::new();
     for name in SCENE_NAMES.into_iter().filter(|n| wanted(n)) {
         let scene = config::make_scene(name, cfg);
         let rows = run_scene(&scene, cfg)?;
@@ -114,10 +133,17 @@ fn main() -> Result<(), Box<dyn Error>> {
         println!("  plot: {}\n", path.display());
         records.extend(rows);
     }
-    if wanted(OCCLUDED) {
-        let (scene, city) = city_shadows(cfg.shadow_lights, cfg.points, SEED);
-        let rows = run_occluded(&scene, &city, cfg)?;
-        let path = out.join(format!("error_vs_time_{OCCLUDED}.svg"));
+    for name in OCCLUDED_NAMES.into_iter().filter(|n| wanted(n)) {
+        let (scene, occluders, sweeps) = if name == CANOPY {
+            let (scene, leaves) = canopy(cfg.canopy_lights, cfg.canopy_points, SEED);
+            (scene, leaves, &CANOPY_SWEEPS)
+        } else {
+            let (scene, city) = city_shadows(cfg.shadow_lights, cfg.points, SEED);
+            (scene, city.occluders, &CITY_SHADOWS_SWEEPS)
+        };
+        let (rows, target) = run_occluded(&scene, &occluders, cfg, sweeps)?;
+        targets.push((name, target));
+        let path = out.join(format!("error_vs_time_{name}.svg"));
         plot_scene(&path, &scene, &rows)?;
         println!("  plot: {}\n", path.display());
         records.extend(rows);
@@ -136,7 +162,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         Vec::new()
     };
 
-    print!("{}", summary(&records, &scaling));
+    print!("{}", summary(&records, &scaling, &targets));
     println!("\nTotal run time: {:.1} s", started.elapsed().as_secs_f64());
     Ok(())
 }
@@ -145,14 +171,15 @@ fn main() -> Result<(), Box<dyn Error>> {
 /// `manylights_report` list the same modules).
 const METHODS: &str = "\
 Methods (all single-threaded, same shading points, errors against the crate's f64 exact_query,
-with the host's shadow rays in the occluded scene):
+with the host's shadow rays in the occluded scenes):
 (a) exact sum written to vectorize: f32 structure-of-arrays in chunks of 8, auto-vectorized,
     f64 flush every 1024 lights; plotted at its measured f32 rounding error (no 0 on a log axis).
-    Occluded scene: the exact shadowed sum, one shadow ray per light above the tangent plane
-    (unoccluded terms vectorized the same way).
+    Occluded scenes: the exact shadowed sum, one any-hit shadow ray per light above the tangent
+    plane (unoccluded terms vectorized the same way), through the obvhs BVH of the occluders.
 (b) the crate's cut with the paper's first-order bound (BoundKind::Paper), relative thresholds.
 (c) the crate's cut with its tightest bound (default), relative and absolute thresholds;
-    occluded scene: shade_query with the conservative classifier of the `shadows` example.
+    occluded scenes: shade_query with the shaft classifier (Haines & Wallace 1994) and shadow
+    rays of `Shadows`, through the same BVH; every classification and ray is timed and counted.
 (d) the crate's cut with Lightcuts' per-node criterion (Threshold::per_node): refine the node of
     largest error until it is below t x estimate (t = 5%..0.5% around Lightcuts' 2%, plus 0.2% and
     0.1% to reach 1% max error; 2%..0.01% in the occluded scene); certified bound reported
@@ -160,8 +187,8 @@ with the host's shadow rays in the occluded scene):
 (e) Monte Carlo light sampling proportional to power (Shirley et al. 1996), alias table.
 (f) importance sampling down the light tree (pbrt-v4 / Conty & Kulla 2018): child chosen by
     weight x max cos / max(D^2, R^2), leaf light by contribution.
-    Occluded scene: (e) and (f) cast one shadow ray per sample.
-(g) Ward 1991 adaptive shadow testing, occluded scene only: all unoccluded contributions,
+    Occluded scenes: (e) and (f) cast one shadow ray per sample.
+(g) Ward 1991 adaptive shadow testing, occluded scenes only: all unoccluded contributions,
     shadow rays in decreasing order until the untested remainder < t x visible sum so far,
     remainder added x hit rate (visible / tested lights, as Radiance's direct()).
 Relative error = max channel |L - exact| / max channel exact.

@@ -5,7 +5,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
-use manylights::ShadeResult;
+use manylights::{ShadeResult, Unoccluded, Visibility};
 
 /// At most this many timed passes over the shading points per
 /// configuration; the fastest is kept.
@@ -43,17 +43,14 @@ impl Sample {
         }
     }
 
-    /// A cut of the crate's tree; `occluded` when the host's visibility
-    /// queries count.
-    pub fn cut(r: ShadeResult, occluded: bool) -> Self {
+    /// A cut of the crate's tree, with the visibility work its host
+    /// counted in an occluded scene.
+    pub fn cut(r: ShadeResult, queries: Option<Queries>) -> Self {
         Self {
             radiance: r.radiance,
             result: Some(r),
             cost: r.cost(),
-            queries: occluded.then_some(Queries {
-                shadow_rays: r.point_queries,
-                classify: r.classify_queries,
-            }),
+            queries,
         }
     }
 }
@@ -61,10 +58,26 @@ impl Sample {
 /// Visibility queries of one shading point.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Queries {
-    /// Shadow rays: point-to-point visibility queries.
+    /// Shadow rays: point-to-point queries, and any other ray the host cast
+    /// (e.g. for a visible fraction).
     pub shadow_rays: u32,
     /// Warnock-style classifications of a node's box.
     pub classify: u32,
+}
+
+/// A visibility host that counts what it does: every classification and
+/// every shadow ray, including those the crate does not see (a visible
+/// fraction's rays).
+pub trait Counted: Visibility {
+    /// The work done since the host was made.
+    fn queries(&self) -> Queries;
+}
+
+/// No occluders: nothing asked, nothing cast.
+impl Counted for Unoccluded {
+    fn queries(&self) -> Queries {
+        Queries::default()
+    }
 }
 
 /// Time and accuracy of one configuration over a set of shading points.
@@ -156,6 +169,54 @@ pub fn measure(
             .zip(references)
             .filter(|(s, exact)| s.result.is_some_and(|r| !r.certifies(**exact)))
             .count(),
+    }
+}
+
+/// Two methods timed in alternating passes over the same points: robust to
+/// a machine whose load drifts during the run.
+#[derive(Clone, Copy, Debug)]
+pub struct Paired {
+    /// Median over the passes of the first method's seconds per point.
+    pub first: f64,
+    /// Median over the passes of the second method's seconds per point.
+    pub second: f64,
+    /// Median over the rounds of the second's pass time over the first's.
+    pub ratio: f64,
+    /// Rounds (one pass of each).
+    pub rounds: usize,
+}
+
+/// Times `rounds` rounds of one pass of `first` and one of `second` over
+/// every point index `0..points`, single-threaded.
+pub fn paired(
+    points: usize,
+    rounds: usize,
+    mut first: impl FnMut(usize) -> Sample,
+    mut second: impl FnMut(usize) -> Sample,
+) -> Paired {
+    let pass = |shade: &mut dyn FnMut(usize) -> Sample| {
+        let t = Instant::now();
+        for i in 0..points {
+            black_box(shade(black_box(i)));
+        }
+        t.elapsed().as_secs_f64() / points as f64
+    };
+    let (mut a, mut b, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..rounds {
+        let (x, y) = (pass(&mut first), pass(&mut second));
+        a.push(x);
+        b.push(y);
+        ratios.push(y / x);
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    Paired {
+        first: median(a),
+        second: median(b),
+        ratio: median(ratios),
+        rounds,
     }
 }
 

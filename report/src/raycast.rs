@@ -2,14 +2,13 @@
 //! building, through the BVH over the buildings; and [`CityView`], what the
 //! `city` and `shadows` examples render.
 
-use std::cell::Cell;
 use std::error::Error;
 use std::time::Duration;
 
 use glam::{DVec3, Vec3};
 use manylights::{Lambert, LightTree, ShadeError, ShadeResult, Shading};
 
-use crate::bvh::{entry_normal, slab};
+use crate::bvh::entry_normal;
 use crate::camera::Camera;
 use crate::compare::{ErrorStats, print_row, shade_pixels, timed};
 use crate::image::write_comparison;
@@ -30,27 +29,15 @@ pub struct Hit {
 impl City {
     /// The nearest surface hit by the ray `origin + t * dir`, `t > 0`.
     pub fn intersect(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
-        let inv_dir = dir.recip();
         let ground_t = if dir.z < 0.0 {
             -origin.z / dir.z
         } else {
             f32::INFINITY
         };
-        let nearest = Cell::new((ground_t, None::<usize>));
-        self.bvh.any(
-            |b| {
-                let (near, far) = slab(origin, inv_dir, b);
-                near <= far && far > 0.0 && near < nearest.get().0
-            },
-            |i| {
-                let (near, far) = slab(origin, inv_dir, &self.buildings[i].bounds);
-                if near <= far && near > 0.0 && near < nearest.get().0 {
-                    nearest.set((near, Some(i)));
-                }
-                false
-            },
-        );
-        let (t, building) = nearest.get();
+        let (t, building) = match self.occluders.nearest(origin, dir) {
+            Some((t, i)) if t < ground_t => (t, Some(i)),
+            _ => (ground_t, None),
+        };
         if !t.is_finite() {
             return None;
         }
@@ -65,7 +52,7 @@ impl City {
                 let b = &self.buildings[i];
                 Hit {
                     point,
-                    normal: entry_normal(origin, inv_dir, &b.bounds, dir),
+                    normal: entry_normal(origin, dir.recip(), &b.bounds, dir),
                     albedo: b.albedo,
                 }
             }

@@ -1,47 +1,148 @@
-//! `Shadows`, the night city's visibility host: a conservative
-//! Warnock-style classifier of shafts from a point to a node's box, and
-//! shadow rays, both against the buildings.
+//! [`Shadows`], the visibility host of the scenes with occluders: a
+//! conservative shaft classifier (Haines and Wallace 1994) and any-hit shadow
+//! rays, both against opaque boxes in an `obvhs` BVH ([`Occluders`]). It is
+//! the recipe for plugging a renderer's own ray tracer into the crate's
+//! `Visibility` trait.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3, Vec3A};
 use manylights::{Aabb, Coverage, NodeRegion, Visibility};
+use obvhs::aabb::Aabb as BvhAabb;
 
-use crate::bvh::{Segment, corners, grown, overlaps, union};
-use crate::scenes::City;
+use crate::bvh::{Occluders, Segment, corners};
+use crate::measure::{Counted, Queries};
 
 /// Shadow rays start this far off the surface along its normal, so that a
 /// point on a wall is not occluded by its own building. It is part of the
 /// host's definition of visibility, used alike by the tree's queries and by
 /// the exact sum.
 pub const SHADOW_OFFSET: f32 = 0.05;
-/// Safety margin of the classifier, in scene units. Coordinates stay below
-/// 1,000, where an `f32` ulp is at most `6.1e-5`; the slab tests and the
-/// shaft slices' corners err by a few ulps. Occluders are inflated by the
-/// margin before a shaft is declared `Visible` and shrunk by it before it is
-/// declared `Occluded`, so rounding cannot turn a conservative answer into a
-/// wrong one.
+
+/// Safety margin of the classifier, in scene units, for scenes whose
+/// coordinates stay below 1,000, where an `f32` ulp is at most `6.1e-5`.
+/// Every `f32` test here (the shadow ray's slab test, the corner segments'
+/// slab tests, a shaft plane's dot product with a box corner, measured in
+/// units of the plane normal's 1-norm, by which its margin is scaled too)
+/// errs by a few ulps of the coordinates, below `1e-3` in all. Occluders are
+/// grown by the margin before a shaft is declared to miss them and shrunk
+/// by it before one is said to block a node, so rounding cannot turn a
+/// conservative answer into a wrong one.
 pub const MARGIN: f32 = 0.01;
 
-/// Slices of a shaft whose bounding boxes the classifier tests.
-pub const SHAFT_PIECES: usize = 8;
+/// Boxes tried as the single occluder of a node: the first few that the
+/// segment to the centre of the node's box meets, in the BVH's traversal
+/// order (nearer child first). A blocker of a whole node is nearly always
+/// among them, and a long segment through foliage meets many boxes that
+/// cannot be one.
+pub const OCCLUDER_CANDIDATES: usize = 4;
 
-/// Occlusion by the city's buildings, for one shading point.
-pub struct Shadows<'c> {
-    city: &'c City,
+/// Points of a node's box that [`Shadows::visible_fraction`] casts a shadow
+/// ray to: the virtual light's position (the lights' intensity-weighted
+/// centroid) and, as offsets from the box's centre in half-extents, the
+/// four vertices of a tetrahedron inscribed in the box at half its size.
+pub const FRACTION_POINTS: [Vec3; 4] = [
+    Vec3::new(0.5, 0.5, 0.5),
+    Vec3::new(0.5, -0.5, -0.5),
+    Vec3::new(-0.5, 0.5, -0.5),
+    Vec3::new(-0.5, -0.5, 0.5),
+];
+
+/// Occlusion by opaque boxes, for one shading point, with counters of the
+/// work asked of it.
+///
+/// # Classification (shaft culling, Haines and Wallace 1994)
+///
+/// The *shaft* of a node is the convex hull `H` of the (lifted) shading
+/// point `p` and the node's box `N` ([`NodeRegion::aabb`]): the union of
+/// every segment from `p` to a point of `N`. Every face of `H` is a face of
+/// `N` or the plane through `p` and an edge of `N`, and every edge of `N` is
+/// parallel to an axis, so `H` is exactly the bounding box of `p` and `N`
+/// cut by the planes through `p` and the *silhouette* edges of `N` (edges
+/// between a face turned towards `p` and one turned away); each such plane
+/// contains an axis and is found in the projection along it ([`Shaft`]).
+///
+/// * [`Coverage::Occluded`] when one occluder, shrunk by [`MARGIN`], meets
+///   the segments from `p` to all eight corners of `N`. For a convex box `B`
+///   the set `{q : [p, q] meets B} = {p + s (b - p) : b in B, s >= 1}` is
+///   convex, so it then holds the corners' convex hull, `N`: every segment
+///   from `p` to the node, so every light's shadow ray, passes at least
+///   [`MARGIN`] deep through `B`, and [`Visibility::visible`] reports it
+///   blocked. Such a box also meets the segment to the centre of `N`, so the
+///   candidates are the first [`OCCLUDER_CANDIDATES`] boxes that an any-hit
+///   traversal of the BVH along that segment meets. This test runs first:
+///   it costs about one shadow ray, and most nodes the cut asks about in a
+///   city are hidden behind a single building.
+/// * [`Coverage::Visible`] when no occluder, grown by [`MARGIN`], meets the
+///   shaft's bounding box and all its planes: a box that lies wholly outside
+///   one half-space containing `H` meets no segment from `p` to `N`. The BVH
+///   is descended through the nodes whose bounds pass the same test (a node
+///   holds its boxes, so a node outside the shaft holds none inside it).
+///   Each plane's offset is the largest value over the hull's vertices (`p`
+///   and the corners of `N`) of the stored normal's dot product, so a
+///   rounded normal tilts the plane but never lets it cut into the shaft;
+///   the rounding of the dot products themselves is within [`MARGIN`]. With
+///   every face of `H` tested, a box is culled exactly when a face plane or
+///   an axis separates it from `H`: in the projection along each axis the
+///   test is the complete separating-axis test of a convex polygon and a
+///   rectangle, and those projections hold every separating axis of two
+///   convex bodies whose edges are axis-parallel or through `p`.
+/// * [`Coverage::Partial`] otherwise, which is always correct; without
+///   building the shaft when a box meets the segment to the centre of `N`
+///   (then the node is not visible).
+///
+/// Both `Visible` and `Occluded` are therefore conservative with respect to
+/// this host's own [`Visibility::visible`], which is what the crate's
+/// certified bound needs (the contract of [`Visibility`]); the member's
+/// tests compare the classifier with rays to many points of random node
+/// boxes and to every light of the nodes the cut asks about.
+///
+/// # Visible fraction
+///
+/// Off by default; [`Shadows::with_visible_fraction`] turns it on: a
+/// partially occluded node is then estimated at the share of
+/// [`FRACTION_POINTS`] (and the virtual light's position) that a shadow ray
+/// reaches, five rays per `Partial` answer. The fraction moves the estimate,
+/// never the certified interval `[0, upper]`, and the crate's cut asks for
+/// it right after a `Partial` answer, when that node's interval is the
+/// largest error in the cut: unless a budget stops the cut first, the node
+/// is refined next and its estimate is rarely used. Five rays per partial
+/// answer then only add cost (in the report's city at a certified 1%, 1.4
+/// times the time for the same errors), so the host casts them only when
+/// asked to, for renderers that shade with a budget.
+pub struct Shadows<'o> {
+    occluders: &'o Occluders,
     /// `SHADOW_OFFSET` times the surface normal: queries start at the shading
     /// point plus this.
     lift: Vec3,
     /// Classifications answered: visible, occluded, partial.
     pub answers: [u32; 3],
+    /// Shadow rays cast: point-to-point queries and the visible fraction's.
+    pub rays: u32,
+    /// Whether [`Visibility::visible_fraction`] casts its rays.
+    fraction: bool,
 }
 
-impl<'c> Shadows<'c> {
+impl<'o> Shadows<'o> {
     /// The host for a shading point with unit `normal`.
-    pub fn new(city: &'c City, normal: Vec3) -> Self {
+    pub fn new(occluders: &'o Occluders, normal: Vec3) -> Self {
         Self {
-            city,
+            occluders,
             lift: normal * SHADOW_OFFSET,
             answers: [0; 3],
+            rays: 0,
+            fraction: false,
         }
+    }
+
+    /// The same host with the visible fraction on (see "Visible fraction").
+    #[must_use]
+    pub fn with_visible_fraction(mut self) -> Self {
+        self.fraction = true;
+        self
+    }
+
+    /// Classifications answered.
+    pub fn classifications(&self) -> u32 {
+        self.answers.iter().sum()
     }
 
     /// Counts and returns `coverage`.
@@ -54,65 +155,188 @@ impl<'c> Shadows<'c> {
         self.answers[slot] += 1;
         coverage
     }
-}
 
-impl Visibility for Shadows<'_> {
-    /// With the shaft the convex hull of the (lifted) point `p` and the
-    /// node's box `N`:
-    ///
-    /// * `Visible` when no building, grown by [`MARGIN`], meets the bounding
-    ///   box of any of [`SHAFT_PIECES`] slices of the shaft. The points
-    ///   `(1 - t) p + t q` (`q` in `N`) with `t` in `[a, b]` lie in the
-    ///   bounding box of the two boxes `(1 - a) p + a N` and `(1 - b) p + b N`
-    ///   (each coordinate is linear in `t`), so the slices' boxes cover the
-    ///   shaft, much more tightly than one box when it runs diagonally.
-    /// * `Occluded` when the segments to all eight corners of `N` meet one
-    ///   building shrunk by [`MARGIN`]. For a convex occluder `B` the set
-    ///   `{q : [p, q] meets B} = {p + s (b - p) : b in B, s >= 1}` is convex,
-    ///   so it then holds the corners' convex hull, `N`: every light's shadow
-    ///   ray is blocked. Only buildings on the segment to the centre of `N`
-    ///   can qualify, so only those are tried.
-    /// * `Partial` otherwise.
-    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
+    /// Classifies the box `target` as seen from `point` (the shading point,
+    /// lifted here): see the type's documentation, "Classification".
+    pub fn classify_box(&mut self, point: Vec3, target: &Aabb) -> Coverage {
         let apex = point + self.lift;
-        let bvh = &self.city.bvh;
-        let buildings = &self.city.buildings;
-        let slice = |t: f32| Aabb {
-            min: apex.lerp(node.aabb.min, t),
-            max: apex.lerp(node.aabb.max, t),
-        };
-        let pieces: [Aabb; SHAFT_PIECES] = std::array::from_fn(|k| {
-            let a = slice(k as f32 / SHAFT_PIECES as f32);
-            let b = slice((k + 1) as f32 / SHAFT_PIECES as f32);
-            grown(&union(a, b), MARGIN)
+        // Occluded: a box that blocks every segment from the apex to the
+        // target meets the segment to its centre; the first few boxes along
+        // that segment are tried.
+        let centre = 0.5 * (target.min + target.max);
+        let to_centre = Segment::new(apex, centre);
+        let mut to_corners: Option<[Segment; 8]> = None;
+        let (mut tried, mut occluded, mut centre_blocked) = (0, false, false);
+        self.occluders.any_along(apex, centre, |b| {
+            centre_blocked |= to_centre.hits(b);
+            let core = BvhAabb::new(b.min + MARGIN, b.max - MARGIN);
+            if !(core.valid() && to_centre.hits(&core)) {
+                return false;
+            }
+            tried += 1;
+            occluded = to_corners
+                .get_or_insert_with(|| corners(target).map(|c| Segment::new(apex, c)))
+                .iter()
+                .all(|s| s.hits(&core));
+            occluded || tried == OCCLUDER_CANDIDATES
         });
-        let shaft = pieces[1..].iter().fold(pieces[0], |a, &b| union(a, b));
-        let near = |b: &Aabb| overlaps(b, &shaft) && pieces.iter().any(|piece| overlaps(b, piece));
-        if !bvh.any(near, |i| near(&buildings[i].bounds)) {
-            return self.answer(Coverage::Visible);
+        if occluded {
+            return self.answer(Coverage::Occluded);
         }
-        let to_centre = Segment::new(apex, 0.5 * (node.aabb.min + node.aabb.max));
-        let to_corners = corners(&node.aabb).map(|c| Segment::new(apex, c));
-        let blocks_all = |i: usize| {
-            let core = grown(&buildings[i].bounds, -MARGIN);
-            core.min.cmple(core.max).all()
-                && to_centre.hits(&core)
-                && to_corners.iter().all(|s| s.hits(&core))
-        };
-        self.answer(if bvh.any(|b| to_centre.hits(b), blocks_all) {
-            Coverage::Occluded
-        } else {
+        if centre_blocked {
+            // A box meets one of the segments, so the node is not visible.
+            return self.answer(Coverage::Partial);
+        }
+        // Visible: no box meets the shaft.
+        let shaft = Shaft::new(apex, target, MARGIN);
+        let meets = |b: &BvhAabb| shaft.meets(b);
+        self.answer(if self.occluders.any_in(meets, meets) {
             Coverage::Partial
+        } else {
+            Coverage::Visible
         })
     }
 
-    /// One shadow ray: the segment from the lifted point to the light.
+    /// One shadow ray from the lifted point `apex`, counted.
+    fn ray(&mut self, apex: Vec3, to: Vec3) -> bool {
+        self.rays += 1;
+        !self.occluders.blocked(apex, to)
+    }
+}
+
+impl Visibility for Shadows<'_> {
+    /// [`Shadows::classify_box`] of the node's box.
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
+        self.classify_box(point, &node.aabb)
+    }
+
+    /// One any-hit shadow ray: the segment from the lifted point to the
+    /// light.
     fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
-        let ray = Segment::new(point + self.lift, light);
-        let buildings = &self.city.buildings;
-        !self
-            .city
-            .bvh
-            .any(|b| ray.hits(b), |i| ray.hits(&buildings[i].bounds))
+        self.ray(point + self.lift, light)
+    }
+
+    /// With the fraction on, the share of [`FRACTION_POINTS`] of the node's
+    /// box (and its centroid) that a shadow ray reaches; `None` otherwise.
+    /// See the type's documentation, "Visible fraction".
+    fn visible_fraction(&mut self, point: Vec3, node: &NodeRegion) -> Option<f32> {
+        if !self.fraction {
+            return None;
+        }
+        let apex = point + self.lift;
+        let centre = 0.5 * (node.aabb.min + node.aabb.max);
+        let half = 0.5 * (node.aabb.max - node.aabb.min);
+        let targets = FRACTION_POINTS
+            .map(|offset| centre + offset * half)
+            .into_iter()
+            .chain([node.centroid]);
+        let seen = targets.filter(|&q| self.ray(apex, q)).count();
+        Some(seen as f32 / (FRACTION_POINTS.len() + 1) as f32)
+    }
+}
+
+impl Counted for Shadows<'_> {
+    fn queries(&self) -> Queries {
+        Queries {
+            shadow_rays: self.rays,
+            classify: self.classifications(),
+        }
+    }
+}
+
+/// Lanes of a shaft's planes. A shaft from a point to a box has at most six
+/// planes, two per projection; they are stored in eight lanes (the unused
+/// ones hold every point) so that the box test vectorizes.
+const PLANE_LANES: usize = 8;
+
+/// The shaft from a point to a box, grown by a margin: its bounding box and
+/// the half-spaces `normal . x <= offset` through the point and the box's
+/// silhouette edges (Haines and Wallace 1994; see [`Shadows`]), normals
+/// stored by component.
+#[derive(Clone, Copy, Debug)]
+pub struct Shaft {
+    min: Vec3A,
+    max: Vec3A,
+    normal: [[f32; PLANE_LANES]; 3],
+    offset: [f32; PLANE_LANES],
+}
+
+impl Shaft {
+    /// The shaft from `apex` to `target`, every face pushed out by `margin`
+    /// (so that a box grown by `margin` on every side meets the grown shaft
+    /// whenever it meets the shaft).
+    pub fn new(apex: Vec3, target: &Aabb, margin: f32) -> Shaft {
+        let mut shaft = Shaft {
+            min: Vec3A::from(target.min.min(apex)) - margin,
+            max: Vec3A::from(target.max.max(apex)) + margin,
+            normal: [[0.0; PLANE_LANES]; 3],
+            offset: [f32::INFINITY; PLANE_LANES],
+        };
+        let mut count = 0;
+        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+            // The projection along the third axis: the point q and the
+            // rectangle [lo, hi].
+            let q = Vec2::new(apex[i], apex[j]);
+            let lo = Vec2::new(target.min[i], target.min[j]);
+            let hi = Vec2::new(target.max[i], target.max[j]);
+            let (below, above) = (q.cmplt(lo), q.cmpgt(hi));
+            if !(below | above).any() {
+                continue; // q projects into the rectangle: no silhouette
+            }
+            let rect = [lo, Vec2::new(hi.x, lo.y), Vec2::new(lo.x, hi.y), hi];
+            let centre = 0.5 * (lo + hi);
+            for (k, &c) in rect.iter().enumerate() {
+                // A side of the rectangle is turned towards q when q lies
+                // strictly beyond it; a corner between a side turned towards
+                // q and one turned away is on the silhouette.
+                let towards_i = if k & 1 == 0 { below.x } else { above.x };
+                let towards_j = if k & 2 == 0 { below.y } else { above.y };
+                if towards_i == towards_j {
+                    continue;
+                }
+                // A normal of the line through q and c (of any length: the
+                // half-plane, its margin and the box test scale alike).
+                let u = c - q;
+                let mut n = Vec2::new(u.y, -u.x);
+                if n == Vec2::ZERO {
+                    continue; // q on the corner: no line through both
+                }
+                if n.dot(centre - q) > 0.0 {
+                    n = -n; // the rectangle's side is the inside
+                }
+                // The half-plane's offset is the largest value over q and
+                // the corners, so that it holds the whole projected hull
+                // whatever the normal's rounding.
+                let reach = rect.iter().map(|r| n.dot(*r)).fold(n.dot(q), f32::max);
+                debug_assert!(count < 6, "two silhouette corners per projection");
+                shaft.normal[i][count] = n.x;
+                shaft.normal[j][count] = n.y;
+                shaft.offset[count] = reach + margin * (n.x.abs() + n.y.abs());
+                count += 1;
+            }
+        }
+        shaft
+    }
+
+    /// Whether the box `b` may meet the shaft: `false` only when it lies
+    /// outside the bounding box or wholly beyond one plane.
+    #[inline]
+    pub fn meets(&self, b: &BvhAabb) -> bool {
+        if (b.min.cmpgt(self.max) | b.max.cmplt(self.min)).any() {
+            return false;
+        }
+        // The smallest `normal . x` over the box, per plane: each term's
+        // smaller value over the box's extent along its axis.
+        let (lo, hi) = (b.min.to_array(), b.max.to_array());
+        let mut beyond = [false; PLANE_LANES];
+        for (k, out) in beyond.iter_mut().enumerate() {
+            let mut sum = 0.0;
+            for axis in 0..3 {
+                let n = self.normal[axis][k];
+                sum += (n * lo[axis]).min(n * hi[axis]);
+            }
+            *out = sum > self.offset[k];
+        }
+        !beyond.iter().any(|&x| x)
     }
 }

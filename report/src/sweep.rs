@@ -18,7 +18,7 @@ use crate::config::{
     SOA_TOLERANCE, TREE_ABSOLUTE, TREE_RELATIVE,
 };
 use crate::exact::SoaLights;
-use crate::measure::{self, Measurement, Method, Record, Sample, measure};
+use crate::measure::{self, Counted, Measurement, Method, Record, Sample, measure};
 use crate::sampling::{LightSampler, PowerSampler, TreeSampler};
 use crate::scenes::{self, Scene, ShadingPoint};
 
@@ -141,9 +141,10 @@ pub fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// The crate's cut at `threshold` over `points`, measured; with the host
-/// `host(pt)` (whose queries are counted) in an occluded scene. The session
-/// is created once and reused, as a renderer would.
-pub fn measure_cut<S: Shader, V: Visibility>(
+/// `host(pt)` in an occluded scene, made per point inside the timed loop,
+/// its classifications and shadow rays counted. The session is created once
+/// and reused, as a renderer would.
+pub fn measure_cut<S: Shader, V: Counted>(
     tree: &LightTree,
     shader: S,
     bench: Bench<'_>,
@@ -154,30 +155,35 @@ pub fn measure_cut<S: Shader, V: Visibility>(
     measure(bench.refs, bench.budget, |i| {
         let pt = &bench.points[i];
         let q = query(pt);
-        let r = match host {
-            Some(host) => shading.shade_query(&q, threshold, host(pt)),
-            None => shading.shade_query(&q, threshold, Unoccluded),
+        let (r, queries) = match host {
+            Some(host) => {
+                let mut host = host(pt);
+                let r = shading.shade_query(&q, threshold, &mut host);
+                (r, Some(host.queries()))
+            }
+            None => (shading.shade_query(&q, threshold, Unoccluded), None),
         };
-        Sample::cut(r.expect("scene thresholds are valid"), host.is_some())
+        Sample::cut(r.expect("scene thresholds are valid"), queries)
     })
 }
 
 /// Both Monte Carlo samplers (power, then down `tree`) measured at every
-/// sample count and recorded, with the same seed per point for every count;
+/// sample count of `counts` and recorded, with the same seed per point for every count;
 /// shadow rays through `host(pt)` in an occluded scene.
 pub fn sample_sweeps<S: Shader, V: Visibility>(
     record: &mut impl FnMut(Method, String, Measurement),
     tree: &LightTree,
     shader: &S,
     bench: Bench<'_>,
+    counts: &[u32],
     host: Option<&dyn Fn(&ShadingPoint) -> V>,
 ) {
     let power = PowerSampler::new(tree.lights());
-    for (n, m) in sample_sweep(&power, shader, bench, host) {
+    for (n, m) in sample_sweep(&power, shader, bench, counts, host) {
         record(Method::PowerSampling, format!("n={n}"), m);
     }
     let tree_sampler = TreeSampler::new(tree);
-    for (n, m) in sample_sweep(&tree_sampler, shader, bench, host) {
+    for (n, m) in sample_sweep(&tree_sampler, shader, bench, counts, host) {
         record(Method::TreeSampling, format!("n={n}"), m);
     }
 }
@@ -187,11 +193,12 @@ fn sample_sweep<L: LightSampler, S: Shader, V: Visibility>(
     sampler: &L,
     shader: &S,
     bench: Bench<'_>,
+    counts: &[u32],
     host: Option<&dyn Fn(&ShadingPoint) -> V>,
 ) -> Vec<(u32, Measurement)> {
-    SAMPLE_COUNTS
-        .into_iter()
-        .map(|n| {
+    counts
+        .iter()
+        .map(|&n| {
             let m = measure(bench.refs, bench.budget, |i| {
                 let pt = &bench.points[i];
                 let mut rng = scenes::rng(SEED ^ ((i as u64) << 20));
@@ -339,7 +346,14 @@ fn sweep<S: Shader + Copy + Send + Sync>(
     }
 
     let shader = make(BoundKind::Tight);
-    sample_sweeps(&mut record, &tree, &shader, bench, unoccluded);
+    sample_sweeps(
+        &mut record,
+        &tree,
+        &shader,
+        bench,
+        &SAMPLE_COUNTS,
+        unoccluded,
+    );
     drop(record);
     Ok(rows)
 }

@@ -18,6 +18,8 @@ const TINY: Config = Config {
     strings_lights: 200,
     specular_lights: 200,
     shadow_lights: 300,
+    canopy_lights: 200,
+    canopy_points: 8,
     scaling_sizes: &[1, 100, 1_000],
     scaling_points: 8,
     budget: Duration::from_millis(1),
@@ -29,8 +31,16 @@ fn every_part_runs_and_keeps_the_bound() {
     for name in SCENE_NAMES {
         records.extend(run_scene(&config::make_scene(name, &TINY), &TINY).unwrap());
     }
+    let mut targets = Vec::new();
     let (scene, city) = scenes::city_shadows(TINY.shadow_lights, TINY.points, config::SEED);
-    records.extend(run_occluded(&scene, &city, &TINY).unwrap());
+    let sweeps = &config::CITY_SHADOWS_SWEEPS;
+    let (rows, target) = run_occluded(&scene, &city.occluders, &TINY, sweeps).unwrap();
+    records.extend(rows);
+    targets.push((config::OCCLUDED, target));
+    let (scene, leaves) = scenes::canopy(TINY.canopy_lights, TINY.canopy_points, config::SEED);
+    let (rows, target) = run_occluded(&scene, &leaves, &TINY, &config::CANOPY_SWEEPS).unwrap();
+    records.extend(rows);
+    targets.push((config::CANOPY, target));
     let scaling = run_scaling(&TINY).unwrap();
     for r in records
         .iter()
@@ -45,7 +55,9 @@ fn every_part_runs_and_keeps_the_bound() {
             assert_eq!(r.measurement.max_error, 0.0, "{}: the exact limit", r.scene);
         }
     }
-    assert!(summary(&records, &scaling).contains("## Summary"));
+    let text = summary(&records, &scaling, &targets);
+    assert!(text.contains("## Summary"));
+    assert!(text.contains("canopy: the tree at a certified 1%"));
 }
 
 #[test]

@@ -32,6 +32,9 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     pub(crate) classify_queries: u32,
     /// Classifications answered visible or occluded.
     decisive_answers: u32,
+    /// Classifications of nodes of at most [`SMALL_NODE_LIGHTS`] lights
+    /// answered partial.
+    small_partials: u32,
     pub(crate) point_queries: u32,
 }
 
@@ -67,6 +70,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             lights: 0,
             classify_queries: 0,
             decisive_answers: 0,
+            small_partials: 0,
             point_queries: 0,
         }
     }
@@ -158,15 +162,23 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     }
 
     /// Whether the host's classifications have been useless so far in this
-    /// call (at least [`GIVE_UP_AFTER`] asked, fewer than one in
-    /// [`GIVE_UP_RATIO`] visible or occluded), so that partial nodes are
-    /// refined without asking and single lights are asked point-to-point:
-    /// with many small occluders (foliage, a lattice) every answer is
-    /// "partial" and asking costs more than it saves.
+    /// call, so that partial nodes are refined without asking and single
+    /// lights are asked point-to-point: with many small occluders (foliage,
+    /// a lattice) every answer is "partial" and asking costs more than it
+    /// saves.
+    ///
+    /// Useless means: at least [`GIVE_UP_AFTER`] *small* nodes (at most
+    /// [`SMALL_NODE_LIGHTS`] lights) answered partial, and fewer than one
+    /// visible or occluded answer (for a node of any size) per
+    /// [`GIVE_UP_RATIO`] of them. Partial answers for large nodes are not
+    /// held against the host: a large node's shaft is wide and the cut
+    /// takes the large nodes first, so even a host that classifies most of
+    /// a city's small nodes answers "partial" for its first few dozen
+    /// nodes.
     #[inline]
     fn gave_up_classifying(&self) -> bool {
-        self.classify_queries >= GIVE_UP_AFTER
-            && self.decisive_answers * GIVE_UP_RATIO < self.classify_queries
+        self.small_partials >= GIVE_UP_AFTER
+            && self.decisive_answers * GIVE_UP_RATIO < self.small_partials
     }
 
     /// Asks the host about a node of unknown visibility taken from the
@@ -186,12 +198,17 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 self.decisive_answers += 1;
                 Seen::Visible
             }
-            Coverage::Partial => Seen::Partial(
-                self.visibility
-                    .visible_fraction(self.point, &region)
-                    .filter(|f| f.is_finite())
-                    .map(|f| f.clamp(0.0, 1.0)),
-            ),
+            Coverage::Partial => {
+                if node.light_count <= SMALL_NODE_LIGHTS {
+                    self.small_partials += 1;
+                }
+                Seen::Partial(
+                    self.visibility
+                        .visible_fraction(self.point, &region)
+                        .filter(|f| f.is_finite())
+                        .map(|f| f.clamp(0.0, 1.0)),
+                )
+            }
         };
         let e = Entry::new(top.class, top.node, seen, top.estimate, top.error);
         if e.key <= 0.0 && e.class == Class::Error {
@@ -313,11 +330,16 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     }
 }
 
-/// Classifications asked before the cut may judge them useless (see
-/// [`Cut::gave_up_classifying`]).
+/// Partial answers for small nodes before the cut may judge classification
+/// useless (see [`Cut::gave_up_classifying`]).
 const GIVE_UP_AFTER: u32 = 32;
-/// At most one useful answer in this many and the cut stops asking.
+/// Fewer useful (visible or occluded) answers than one per this many partial
+/// answers for small nodes and the cut stops asking.
 const GIVE_UP_RATIO: u32 = 8;
+/// Nodes of at most this many lights are small: after a partial answer for
+/// one, its few lights are soon asked one by one, so the classification did
+/// not pay.
+const SMALL_NODE_LIGHTS: u32 = 16;
 
 /// The certified bound reported for a summed error: the compensated sums
 /// are within a few ulps of the sums of magnitudes; what that leaves of the

@@ -9,7 +9,7 @@ use manylights::{Aabb, PointLight};
 use rand::RngExt;
 
 use super::{Material, Scene, SceneRng, ShadingPoint, light_bounds, rng};
-use crate::bvh::Bvh;
+use crate::bvh::Occluders;
 
 /// Distance between neighbouring street centre lines.
 const BLOCK_PITCH: f32 = 40.0;
@@ -78,8 +78,9 @@ pub struct City {
     pub lights: Vec<PointLight>,
     /// The buildings.
     pub buildings: Vec<Building>,
-    /// Hierarchy over the buildings' boxes.
-    pub bvh: Bvh,
+    /// The buildings' boxes in a BVH: what occludes and what primary rays
+    /// hit (box `i` is building `i`).
+    pub occluders: Occluders,
 }
 
 impl City {
@@ -96,7 +97,7 @@ impl City {
         let boxes: Vec<Aabb> = buildings.iter().map(|b| b.bounds).collect();
         City {
             lights,
-            bvh: Bvh::new(&boxes),
+            occluders: Occluders::new(&boxes),
             buildings,
         }
     }
