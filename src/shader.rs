@@ -140,28 +140,17 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         (self.first.prepare(surface), self.second.prepare(surface))
     }
 
+    /// The sum of the two terms, for a light at `x` of intensity `i`.
     #[inline]
-    fn eval(
-        &self,
-        point: &Self::PerPoint,
-        surface: &Surface,
-        position: DVec3,
-        intensity: DVec3,
-    ) -> DVec3 {
-        self.first.eval(&point.0, surface, position, intensity)
-            + self.second.eval(&point.1, surface, position, intensity)
+    fn eval(&self, point: &Self::PerPoint, surface: &Surface, x: DVec3, i: DVec3) -> DVec3 {
+        self.first.eval(&point.0, surface, x, i) + self.second.eval(&point.1, surface, x, i)
     }
 
+    /// The sum of the two intervals, for per-point data `p` and surface `s`.
     #[inline]
-    fn bound(
-        &self,
-        point: &Self::PerPoint,
-        surface: &Surface,
-        node: &Node,
-        cone: &Cone,
-    ) -> NodeEstimate {
-        let a = self.first.bound(&point.0, surface, node, cone);
-        let b = self.second.bound(&point.1, surface, node, cone);
+    fn bound(&self, p: &Self::PerPoint, s: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
+        let a = self.first.bound(&p.0, s, node, cone);
+        let b = self.second.bound(&p.1, s, node, cone);
         NodeEstimate {
             estimate: a.estimate + b.estimate,
             lower: a.lower + b.lower,

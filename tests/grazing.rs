@@ -26,7 +26,7 @@ mod common;
 
 use std::ops::{Add, Div, Mul, Neg};
 
-use common::{cases, direction, intensity, threshold, vec_in};
+use common::{cases, check_finite, direction, intensity, threshold, vec_in};
 use glam::{DVec3, Vec3};
 use manylights::{
     BoundKind, Combined, Lambert, LightTree, Phong, PointLight, Query, ShadeResult, Shader,
@@ -584,13 +584,7 @@ fn check_contract(r: &ShadeResult, model: DVec3, lights: usize) -> Result<(), Te
             r.error_bound
         );
     }
-    prop_assert!(
-        r.radiance.is_finite(),
-        "radiance not finite: {}",
-        r.radiance
-    );
-    prop_assert!(!r.error_bound.is_nan(), "bound is NaN");
-    Ok(())
+    check_finite(r)
 }
 
 /// Shades `scene` with `shader` at `t` (and at the exact and infinite

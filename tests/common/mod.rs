@@ -113,6 +113,11 @@ pub fn check_bound(r: &ShadeResult, exact: glam::DVec3) -> Result<(), TestCaseEr
         (r.radiance - exact).abs(),
         r.error_bound
     );
+    check_finite(r)
+}
+
+/// A finite radiance and a bound that is not NaN.
+pub fn check_finite(r: &ShadeResult) -> Result<(), TestCaseError> {
     prop_assert!(
         r.radiance.is_finite(),
         "radiance not finite: {}",
