@@ -86,6 +86,14 @@ pub const SUM_SLACK: f64 = 8.0 * f64::EPSILON;
 /// error, so `8 * f64::EPSILON` covers it with margin.
 pub const BUILD_LENGTH_SLACK: f64 = 8.0 * f64::EPSILON;
 
+/// Relative widening of a distance computed in `f64` from a stored `f32` box
+/// corner and the shading point ([`Aabb::distance_range`](crate::Aabb::distance_range)):
+/// each coordinate difference is within one rounding (`2^-53` relative) of
+/// the exact one, the sum of squares adds three and the square root one,
+/// so the length is within about `3 * 2^-53` relative; `8 * f64::EPSILON`
+/// (`16 * 2^-53`) covers it with margin.
+pub const DISTANCE_SLACK: f64 = 8.0 * f64::EPSILON;
+
 /// Relative tolerance of [`LightTree::validate`](crate::LightTree::validate)
 /// when it compares a node's stored intensity with the sum of its children's:
 /// both are `f64` sums of the same `f32` values in different orders, which

@@ -63,7 +63,11 @@ const LOBE_LOG_SPACE_BELOW: f64 = 1e-280;
 /// ```
 ///
 /// with cosines from [`Cone::cos_range`] (sines and cosines, never `acos`,
-/// whose error near 0 is raised to the `e`-th power). The estimate is the
+/// whose error near 0 is raised to the `e`-th power). The distances are
+/// tightened by the node's box, which also holds every member: `D - R` is
+/// replaced by the larger of it and the box's nearest distance, `D + R` by
+/// the smaller of it and the box's farthest corner
+/// ([`Aabb::distance_range`](crate::Aabb::distance_range), rounded outward). The estimate is the
 /// virtual light `I ks max(0, cos alpha_c)^e / D^2`. The power is taken in log
 /// space when it would underflow, so no bound is lost to a `cos^e` that
 /// flushed to zero while `I/d^2` is large. Exponents `0 <= e <= 1e6`.
@@ -338,7 +342,7 @@ impl Shader for Phong {
     }
 
     #[inline]
-    fn bound(&self, mirror: &Mirror, _surface: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
+    fn bound(&self, mirror: &Mirror, surface: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
         let r = mirror.unit;
         let (cos_lo, cos_hi) = cone.cos_range(r);
         if cos_hi <= 0.0 {
@@ -346,10 +350,21 @@ impl Shader for Phong {
         }
         let inv_d = cone.inv_distance;
         let scale = node.intensity * self.ks * (inv_d * inv_d);
+        // Every member lies in the ball and in the box: its distance is at
+        // least the larger of D - R and the box's nearest distance, and at
+        // most the smaller of D + R and the box's farthest corner.
+        let (box_near, box_far) = node.aabb.distance_range(surface.point);
+        let near_falloff = cone.near_falloff().min(square(cone.distance / box_near));
+        let far_falloff = cone.far_falloff().max(square(cone.distance / box_far));
         NodeEstimate::new(
             self.lobe(scale, r.dot(cone.axis)),
-            self.lobe(scale * cone.far_falloff(), cos_lo),
-            self.lobe(scale * cone.near_falloff(), cos_hi),
+            self.lobe(scale * far_falloff, cos_lo),
+            self.lobe(scale * near_falloff, cos_hi),
         )
     }
+}
+
+#[inline]
+fn square(x: f64) -> f64 {
+    x * x
 }

@@ -2,6 +2,8 @@
 
 use glam::{DVec3, Vec3};
 
+use crate::numeric::DISTANCE_SLACK;
+
 use crate::numeric::dot_of_difference;
 
 /// An axis-aligned box, `min <= max` per axis.
@@ -50,6 +52,21 @@ impl Aabb {
             centre.abs().max_element() + half.max_element() + origin.abs().max_element();
         let slack = relative_slack * magnitude;
         (middle - reach - slack, middle + reach + slack)
+    }
+
+    /// Smallest and largest distance from `origin` to a point of the box
+    /// (the smallest is 0 when `origin` is inside), widened outward by
+    /// [`DISTANCE_SLACK`](crate::numeric::DISTANCE_SLACK) for their `f64`
+    /// rounding.
+    #[must_use]
+    pub fn distance_range(&self, origin: DVec3) -> (f64, f64) {
+        let (min, max) = (self.min.as_dvec3(), self.max.as_dvec3());
+        let nearest = origin.clamp(min, max) - origin;
+        let farthest = (min - origin).abs().max((max - origin).abs());
+        (
+            nearest.length() * (1.0 - DISTANCE_SLACK),
+            farthest.length() * (1.0 + DISTANCE_SLACK),
+        )
     }
 
     /// The corner of the box farthest along `dir`: per axis `max` where
