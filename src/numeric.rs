@@ -94,6 +94,26 @@ pub const BUILD_LENGTH_SLACK: f64 = 8.0 * f64::EPSILON;
 /// (`16 * 2^-53`) covers it with margin.
 pub const DISTANCE_SLACK: f64 = 8.0 * f64::EPSILON;
 
+/// Absolute padding of the harmonic norms computed at build time, in units
+/// of `f64::EPSILON`, on top of one `f64::EPSILON` per member light, before
+/// they are rounded upward to `f32`.
+///
+/// A stored norm is `q = |C| / I_k` with `C` the `2l + 1` Schmidt
+/// semi-normalised solid-harmonic moments of degree `l` of the node's
+/// members, scaled by `1 / R` (so `|y / R| <= 1`). Each moment is a
+/// recursive `f64` sum of `n` terms; by Minkowski's inequality and
+/// `sum_j R_lj(y)^2 = |y|^(2l)` the vector of summation errors has norm at
+/// most `(n - 1) 2^-53 P I_k`, `P = sum_i I_ik |y_i / R|^l / I_k <= 1`. Each
+/// term is evaluated by the build's solid-harmonic evaluation with at most 20 roundings on
+/// intermediate values of at most `20 |y|^l` after normalisation, plus the
+/// scaling `y / R` (two roundings, moving a harmonic by at most `2^9 eps |y|^l`):
+/// within `2^11 eps |y|^l` each, `2^13 eps P I_k` for the vector of `2l + 1 <= 11`.
+/// So the computed `q` is within `(n + 2^13) eps` of the exact one, up to a
+/// few relative ulps that the final `1 + BUILD_LENGTH_SLACK` covers;
+/// `2^16` leaves a factor 8. A test checks the addition theorem on the
+/// evaluated harmonics.
+pub const HARMONIC_BUILD_PAD: f64 = 65_536.0;
+
 /// Relative tolerance of [`LightTree::validate`](crate::LightTree::validate)
 /// when it compares a node's stored intensity with the sum of its children's:
 /// both are `f64` sums of the same `f32` values in different orders, which

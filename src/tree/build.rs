@@ -6,7 +6,7 @@ use glam::{DVec3, Vec3};
 use super::layout::{LightTree, Node};
 use super::morton;
 use crate::geometry::Aabb;
-use crate::numeric::{BUILD_LENGTH_SLACK, round_up_f32};
+use crate::numeric::{BUILD_LENGTH_SLACK, HARMONIC_BUILD_PAD, round_up_f32};
 use crate::{BuildError, PointLight};
 
 impl LightTree {
@@ -125,15 +125,16 @@ impl TreeBuilder {
             .fold(Aabb::EMPTY, |b, l| b.union_point(l.position));
         let codes = morton::codes(lights, scene);
         let order = morton::sort(&codes);
-        let mut codes: Vec<u64> = order.iter().map(|&k| codes[k as usize]).collect();
+        // Median splits reorder lights within a run of equal codes only, so
+        // the sorted codes stay valid for every run.
+        let codes: Vec<u64> = order.iter().map(|&k| codes[k as usize]).collect();
         tree.lights = order.iter().map(|&k| lights[k as usize]).collect();
         tree.order = order;
-        let identity: Vec<u32> = (0..n as u32).collect();
 
         // Breadth-first: children of a node are appended together, so they
         // are contiguous. `depths[i]` is node i's depth.
         let mut depths: Vec<u32> = vec![0];
-        tree.nodes.push(node_stats(&tree.lights, &identity, 0..n));
+        tree.nodes.push(node_stats(&tree.lights, 0..n));
         let mut i = 0;
         while i < tree.nodes.len() {
             let node = tree.nodes[i];
@@ -157,16 +158,13 @@ impl TreeBuilder {
                     tree.nodes[i].child_count = groups.len() as u32;
                     for g in groups {
                         let r = range.start + g.start..range.start + g.end;
-                        tree.nodes.push(node_stats(&tree.lights, &identity, r));
+                        tree.nodes.push(node_stats(&tree.lights, r));
                         depths.push(depth + 1);
                     }
                 }
             }
             i += 1;
         }
-        // Median splits reorder lights within a run of equal codes only, so
-        // the codes stay valid; they are not needed any more.
-        codes.clear();
         tree.nodes.shrink_to_fit();
         Ok(tree)
     }
@@ -225,26 +223,6 @@ fn median_split(
     out.push(mid..lights.len());
     out
 }
-
-/// Absolute padding of the harmonic norms computed at build time, in units
-/// of `f64::EPSILON`, on top of one `f64::EPSILON` per member light, before
-/// they are rounded upward to `f32`.
-///
-/// A stored norm is `q = |C| / I_k` with `C` the `2l + 1` Schmidt
-/// semi-normalised solid-harmonic moments of degree `l` of the node's
-/// members, scaled by `1 / R` (so `|y / R| <= 1`). Each moment is a
-/// recursive `f64` sum of `n` terms; by Minkowski's inequality and
-/// `sum_j R_lj(y)^2 = |y|^(2l)` the vector of summation errors has norm at
-/// most `(n - 1) 2^-53 P I_k`, `P = sum_i I_ik |y_i / R|^l / I_k <= 1`. Each
-/// term is evaluated by [`solid_harmonics`] with at most 20 roundings on
-/// intermediate values of at most `20 |y|^l` after normalisation, plus the
-/// scaling `y / R` (two roundings, moving a harmonic by at most `2^9 eps |y|^l`):
-/// within `2^11 eps |y|^l` each, `2^13 eps P I_k` for the vector of `2l + 1 <= 11`.
-/// So the computed `q` is within `(n + 2^13) eps` of the exact one, up to a
-/// few relative ulps that the final `1 + BUILD_LENGTH_SLACK` covers;
-/// `2^16` leaves a factor 8. A test checks the addition theorem on the
-/// evaluated harmonics.
-const HARMONIC_BUILD_PAD: f64 = 65_536.0;
 
 /// Number of real solid harmonics of degrees 3, 4 and 5: `7 + 9 + 11`.
 pub(crate) const HARMONIC_COUNT: usize = 27;
@@ -386,21 +364,16 @@ pub(crate) fn harmonic_norms(
     out
 }
 
-/// Computes a node's statistics over `lights[idx[range]]` (all in `f64`,
+/// Computes a node's statistics over `lights[range]` (all in `f64`,
 /// then stored as documented on [`Node`]).
-pub(super) fn node_stats(
-    lights: &[PointLight],
-    idx: &[u32],
-    range: core::ops::Range<usize>,
-) -> Node {
-    let members = &idx[range.clone()];
+pub(super) fn node_stats(lights: &[PointLight], range: core::ops::Range<usize>) -> Node {
+    let members = &lights[range.clone()];
     let mut intensity = DVec3::ZERO;
     let mut weight = 0.0f64;
     let mut weighted_pos = DVec3::ZERO;
     let mut plain_pos = DVec3::ZERO;
     let mut aabb = Aabb::EMPTY;
-    for &k in members {
-        let l = lights[k as usize];
+    for &l in members {
         let w = f64::from(l.weight());
         let x = l.position.as_dvec3();
         intensity += l.intensity.as_dvec3();
@@ -421,8 +394,8 @@ pub(super) fn node_stats(
     let c = centroid.as_dvec3();
 
     let mut radius_sq = 0.0f64;
-    for &k in members {
-        let d = lights[k as usize].position.as_dvec3() - c;
+    for l in members {
+        let d = l.position.as_dvec3() - c;
         radius_sq = radius_sq.max(d.length_squared());
     }
     let radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
@@ -435,8 +408,7 @@ pub(super) fn node_stats(
     let mut first = [DVec3::ZERO; 3];
     let mut second = [[0.0f64; 6]; 3];
     let mut harmonic = [[0.0f64; HARMONIC_COUNT]; 3];
-    for &k in members {
-        let l = lights[k as usize];
+    for &l in members {
         let d = l.position.as_dvec3() - c;
         let i = l.intensity.as_dvec3();
         let products = [

@@ -28,10 +28,9 @@ impl LightTree {
         for (slot, &k) in self.lights.iter_mut().zip(&self.order) {
             *slot = lights[k as usize];
         }
-        let identity: Vec<u32> = (0..self.lights.len() as u32).collect();
         for i in 0..self.nodes.len() {
             let old = self.nodes[i];
-            let mut fresh = node_stats(&self.lights, &identity, old.lights());
+            let mut fresh = node_stats(&self.lights, old.lights());
             fresh.first_child = old.first_child;
             fresh.child_count = old.child_count;
             self.nodes[i] = fresh;
