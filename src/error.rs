@@ -80,6 +80,15 @@ pub enum ShadeError {
     /// The interpolation band must be finite and greater than 1.
     #[error("interpolation band must be finite and > 1, got {0}")]
     InvalidBand(f64),
+    /// A batch call was given a results slice of another length than its
+    /// queries.
+    #[error("batch of {queries} queries given {results} result slots")]
+    BatchLength {
+        /// Number of queries.
+        queries: usize,
+        /// Number of result slots.
+        results: usize,
+    },
 }
 
 /// A broken invariant found by [`LightTree::validate`](crate::LightTree::validate).

@@ -302,6 +302,13 @@ fn box_heights(node: &Node, surface: &Surface) -> (f64, f64) {
 impl Shader for Lambert {
     type PerPoint = ();
 
+    /// Always `Some(kd)`, whichever [`BoundKind`]: shared cuts use their own
+    /// bound (the series, enlarged over the group of points).
+    #[inline]
+    fn diffuse_albedo(&self) -> Option<DVec3> {
+        Some(self.kd)
+    }
+
     #[inline]
     fn prepare(&self, _surface: &Surface) {}
 
@@ -514,41 +521,14 @@ impl Lambert {
         let inv_d2 = inv_d * inv_d;
         let sigma = cone.sin_half_angle;
 
-        // Degrees 0 to 2 per channel, in units of I_k / D^2:
-        // c0 + (n.o - 3 c0 uh.o) / D + (15 c0 uh.S.uh - 3 c0 tr S - 6 uh.S.n) / (2 D^2).
-        let grad = n - 3.0 * c0 * uh;
+        let series = degree_two(n, cone, node);
         let o = node.channel_offsets.map(|v| v.as_dvec3());
-        let first = DVec3::new(grad.dot(o[0]), grad.dot(o[1]), grad.dot(o[2])) * inv_d;
         let offset_lens = DVec3::new(
             o[0].abs().element_sum(),
             o[1].abs().element_sum(),
             o[2].abs().element_sum(),
         ) * inv_d;
-        // The degree-2 bracket is linear in S: one weight per stored entry
-        // [xx, yy, zz, xy, xz, yz], shared by the three channels.
-        let (a, b) = (15.0 * c0, 3.0 * c0);
-        let weights = [
-            a * uh.x * uh.x - b - 6.0 * uh.x * n.x,
-            a * uh.y * uh.y - b - 6.0 * uh.y * n.y,
-            a * uh.z * uh.z - b - 6.0 * uh.z * n.z,
-            2.0 * a * uh.x * uh.y - 6.0 * (uh.x * n.y + uh.y * n.x),
-            2.0 * a * uh.x * uh.z - 6.0 * (uh.x * n.z + uh.z * n.x),
-            2.0 * a * uh.y * uh.z - 6.0 * (uh.y * n.z + uh.z * n.y),
-        ];
-        let mut second = DVec3::ZERO;
-        let mut mu2 = DVec3::ZERO;
-        for k in 0..3 {
-            let s = &node.channel_covariances[k];
-            let mut form = 0.0;
-            for (entry, weight) in s.iter().zip(weights) {
-                form += f64::from(*entry) * weight;
-            }
-            second[k] = form;
-            mu2[k] = f64::from(s[0]) + f64::from(s[1]) + f64::from(s[2]);
-        }
-        let second = second * (0.5 * inv_d2);
-        let mu2 = mu2 * inv_d2;
-        let series = c0 + first + second;
+        let mu2 = node.mean_squared_radii() * inv_d2;
 
         // Remainder in units of I_k / D^2. The quantities it grows with,
         // widened for their input rounding (see SERIES_SLACK).
@@ -594,6 +574,115 @@ impl Lambert {
             None,
         )
     }
+}
+
+
+/// What a group of shading points knows of a node's geometry for
+/// [`shared_width`], as upper bounds over every point `p` of the group and
+/// its exact unit normal `n`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SharedView {
+    /// `1 / D` for the smallest distance `D > R` from a point to the
+    /// node's centroid.
+    pub(crate) inv_nearest: f64,
+    /// `|c0| = |n . (c - p)| / |c - p|`, at most 1.
+    pub(crate) cosine: f64,
+    /// `|n . (x - c)|` over the node's box.
+    pub(crate) height: f64,
+    /// `|n - n0|` for the group's mean normal `n0` (how far `n` is from
+    /// what `height` was measured along).
+    pub(crate) tilt: f64,
+}
+
+/// The width of the series interval shared by every shading point of a
+/// group that sees every member of `node` strictly above its tangent plane,
+/// per channel in units of `I_k / D^2` (`D` the group's nearest distance,
+/// [`SharedView`]): for each such point `p`, the node's exact sum lies
+/// within that width times `I_k kd_k / D^2` of
+/// `I_k kd_k / D_p^2 * degree_two(..)` at `p`.
+///
+/// Why it holds: the width of [`Lambert::series`] at `p` is a sum of terms
+/// that grow as `D_p` falls (`sigma = R / D_p`, `|o_k| / D_p`,
+/// `tr(S_k) / D_p^2`, the tail sums, `D_p / (D_p - R)`) and as `|c0|` and
+/// `hperp` grow, so it is largest at the smallest distance with the largest
+/// `|c0|` and `hperp`; `A_m^2 = c0^2 (m+1)^2 + nu^2 m (m+1) / 2` with
+/// `nu <= 1`; `|nperp . y| <= |n . y| + |c0| |uh . y|`,
+/// `|n . y| <= |n0 . y| + |n - n0| |y|` and `|y| <= R` give
+/// `hperp <= height + (tilt + |c0|) R`; the clamp term vanishes with every
+/// member above the plane; and `I_k / D_p^2 <= I_k / D^2`.
+pub(crate) fn shared_width(node: &Node, view: &SharedView) -> DVec3 {
+    let inv_d = view.inv_nearest;
+    let inv_d2 = inv_d * inv_d;
+    let radius = f64::from(node.radius);
+    let sigma = radius * inv_d;
+    let inv_rho = 1.0 / (1.0 - sigma);
+    let o = node.channel_offsets.map(|v| v.as_dvec3());
+    let offset_lens = DVec3::new(
+        o[0].abs().element_sum(),
+        o[1].abs().element_sum(),
+        o[2].abs().element_sum(),
+    ) * inv_d;
+    let mu2 = node.mean_squared_radii() * inv_d2;
+    let ac = view.cosine.min(1.0) + SERIES_SLACK;
+    let hperp = (view.height + (view.tilt + ac + SERIES_SLACK) * radius) * inv_d;
+    let mut remainder = DVec3::ZERO;
+    let mut mu_prev = mu2;
+    let mut sigma_m = sigma * sigma * sigma;
+    for (d, q) in node.harmonic_norms.iter().enumerate() {
+        let m = (d + 3) as f64;
+        let q = q.as_dvec3() * sigma_m;
+        let harmonic = (ac * ac * (m + 1.0) * (m + 1.0) + 0.5 * m * (m + 1.0)).sqrt();
+        let across = q * (ac * (m + 1.0)) + mu_prev * (hperp * 0.5 * m * (m + 1.0));
+        remainder += (q * harmonic).min(across);
+        mu_prev *= sigma;
+        sigma_m *= sigma;
+    }
+    let mu6 = mu_prev * sigma;
+    let (g1, g2) = tail_sums(sigma, inv_rho);
+    let tail = mu6 * g1;
+    remainder += tail.min(tail * ac + mu_prev * (hperp * g2));
+    let remainder = remainder * (1.0 + SERIES_SLACK * inv_rho);
+    let sums = f64::from(node.light_count) * f64::EPSILON * sigma * (1.0 + 18.0 * sigma);
+    let slack = SERIES_SLACK * (1.0 + offset_lens + mu2)
+        + f32::EPSILON as f64 * (offset_lens + 33.0 * mu2)
+        + sums
+        + POINT_SLACK * inv_rho * inv_rho * inv_rho;
+    remainder + slack
+}
+
+/// The multipole series of `g` through degree 2, summed over the node's
+/// members, per channel in units of `I_k / D^2` (see [`Lambert`]'s docs):
+/// `c0 + (n.o - 3 c0 uh.o) / D + (15 c0 uh.S.uh - 3 c0 tr S - 6 uh.S.n) / (2 D^2)`.
+/// The node bound and the shared cuts of batch shading both evaluate it
+/// here, so its rounding is the one [`SERIES_SLACK`] accounts for.
+#[inline]
+pub(crate) fn degree_two(n: DVec3, cone: &Cone, node: &Node) -> DVec3 {
+    let uh = cone.axis;
+    let c0 = n.dot(uh);
+    let inv_d = cone.inv_distance;
+    let grad = n - 3.0 * c0 * uh;
+    let o = node.channel_offsets.map(|v| v.as_dvec3());
+    let first = DVec3::new(grad.dot(o[0]), grad.dot(o[1]), grad.dot(o[2])) * inv_d;
+    // The degree-2 bracket is linear in S: one weight per stored entry
+    // [xx, yy, zz, xy, xz, yz], shared by the three channels.
+    let (a, b) = (15.0 * c0, 3.0 * c0);
+    let weights = [
+        a * uh.x * uh.x - b - 6.0 * uh.x * n.x,
+        a * uh.y * uh.y - b - 6.0 * uh.y * n.y,
+        a * uh.z * uh.z - b - 6.0 * uh.z * n.z,
+        2.0 * a * uh.x * uh.y - 6.0 * (uh.x * n.y + uh.y * n.x),
+        2.0 * a * uh.x * uh.z - 6.0 * (uh.x * n.z + uh.z * n.x),
+        2.0 * a * uh.y * uh.z - 6.0 * (uh.y * n.z + uh.z * n.y),
+    ];
+    let mut second = DVec3::ZERO;
+    for k in 0..3 {
+        let mut form = 0.0;
+        for (entry, weight) in node.channel_covariances[k].iter().zip(weights) {
+            form += f64::from(*entry) * weight;
+        }
+        second[k] = form;
+    }
+    c0 + first + second * (0.5 * inv_d * inv_d)
 }
 
 impl ViewIndependent for Lambert {}

@@ -162,7 +162,7 @@ pub use light::PointLight;
 pub use phong::{Mirror, Phong};
 pub use shader::{Combined, NodeEstimate, Shader, ViewIndependent};
 pub use shading::{
-    Accepts, NoView, Query, ShadeResult, Shading, Stop, Target, Threshold, WithView,
+    Accepts, BatchStats, NoView, Query, ShadeResult, Shading, Stop, Target, Threshold, WithView,
 };
 pub use tree::{LightTree, Node, TreeBuilder};
 pub use visibility::{Coverage, NodeRegion, Unoccluded, Visibility};

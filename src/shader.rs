@@ -105,6 +105,16 @@ pub trait Shader {
         node: &Node,
         cone: &Cone,
     ) -> NodeEstimate;
+
+    /// The albedo `kd` if this shader is exactly diffuse reflection: if
+    /// [`eval`](Self::eval) is [`Lambert`](crate::Lambert)'s term with this
+    /// albedo (up to rounding), whatever the view. Batch shading
+    /// ([`Shading::shade_batch`](crate::Shading::shade_batch)) then shares
+    /// cuts between neighbouring points with the crate's own diffuse
+    /// bounds; for `None` (the default) it shades each point on its own.
+    fn diffuse_albedo(&self) -> Option<DVec3> {
+        None
+    }
 }
 
 /// Marker for shaders whose result does not depend on the view direction
@@ -156,6 +166,12 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
             lower: a.lower + b.lower,
             upper: a.upper + b.upper,
         }
+    }
+
+    /// Diffuse when both terms are: the albedos add.
+    #[inline]
+    fn diffuse_albedo(&self) -> Option<DVec3> {
+        Some(self.first.diffuse_albedo()? + self.second.diffuse_albedo()?)
     }
 }
 

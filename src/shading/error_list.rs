@@ -220,6 +220,16 @@ impl ErrorList {
         (self.estimate, self.error)
     }
 
+    /// Number of waiting entries.
+    pub(crate) fn len(&self) -> usize {
+        self.heap.len()
+    }
+
+    /// The waiting entries, in no particular order.
+    pub(crate) fn waiting(&self) -> impl Iterator<Item = &Entry> + '_ {
+        self.heap.iter().map(|k| &self.entries[k.slot as usize])
+    }
+
     /// Removes every waiting entry, in no particular order.
     pub(crate) fn drain(&mut self) -> impl Iterator<Item = Entry> + '_ {
         let entries = &self.entries;

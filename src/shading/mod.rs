@@ -2,7 +2,9 @@
 //! thresholds, the error list, refinement, interpolation across levels and
 //! the exact reference sum.
 
+mod batch;
 mod blend;
+mod packed;
 mod error_list;
 mod exact;
 mod query;
@@ -23,6 +25,7 @@ use blend::Pending;
 use error_list::ErrorList;
 use refine::{Cut, reported_bound};
 
+pub use batch::BatchStats;
 pub use query::{Accepts, NoView, Query, WithView};
 pub use result::{ShadeResult, Stop};
 pub use threshold::{Target, Threshold};
@@ -52,6 +55,7 @@ pub struct Shading<'t, S: Shader> {
 struct Scratch {
     list: ErrorList,
     blend: Vec<Pending>,
+    batch: batch::BatchScratch,
 }
 
 impl LightTree {

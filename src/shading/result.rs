@@ -40,6 +40,17 @@ pub struct ShadeResult {
 }
 
 impl ShadeResult {
+    /// Nothing shaded yet: a placeholder for scratch space.
+    pub(crate) const EMPTY: Self = Self {
+        radiance: DVec3::ZERO,
+        error_bound: DVec3::ZERO,
+        nodes_evaluated: 0,
+        lights_evaluated: 0,
+        classify_queries: 0,
+        point_queries: 0,
+        stop: Stop::ThresholdMet,
+    };
+
     /// Relative rounding allowance of the certified-bound contract:
     /// `|radiance - exact| <= error_bound + ROUNDING_ALLOWANCE * exact` per
     /// channel.

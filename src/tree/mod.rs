@@ -3,7 +3,7 @@
 
 mod build;
 mod layout;
-mod morton;
+pub(crate) mod morton;
 mod refit;
 mod validate;
 

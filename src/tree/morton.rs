@@ -8,7 +8,7 @@ use crate::geometry::Aabb;
 
 /// Bits of a Morton code per axis: three interleaved 21-bit coordinates
 /// fill 63 bits of a `u64`.
-pub(super) const BITS_PER_AXIS: u32 = 21;
+pub(crate) const BITS_PER_AXIS: u32 = 21;
 
 /// Morton codes of `lights` over the cube of side the largest extent of
 /// `scene` (cubic cells, so a flat scene is split across its thin axis only
@@ -29,7 +29,7 @@ pub(super) fn codes(lights: &[PointLight], scene: Aabb) -> Vec<u64> {
 }
 
 /// The 21 low bits of `v`, two zero bits inserted after each.
-fn spread(v: u32) -> u64 {
+pub(crate) fn spread(v: u32) -> u64 {
     let mut x = u64::from(v) & 0x1f_ffff;
     x = (x | x << 32) & 0x1f_0000_0000_ffff;
     x = (x | x << 16) & 0x1f_0000_ff00_00ff;
@@ -42,7 +42,7 @@ fn spread(v: u32) -> u64 {
 /// Indices of `codes` in increasing code order (stable): a least
 /// significant digit radix sort, 8 bits a pass, passes whose digit is the
 /// same for every code skipped. Linear time.
-pub(super) fn sort(codes: &[u64]) -> Vec<u32> {
+pub(crate) fn sort(codes: &[u64]) -> Vec<u32> {
     let n = codes.len();
     let mut order: Vec<u32> = (0..n as u32).collect();
     let mut keys = codes.to_vec();

@@ -1,0 +1,662 @@
+//! Batch shading: one certified cut shared by each group of neighbouring
+//! points, each point summing that cut's estimates at its own position and
+//! normal.
+
+use core::ops::Range;
+
+use glam::DVec3;
+
+use super::error_list::{Class, Entry, ErrorList, Seen};
+use super::packed::Packed;
+use super::refine::reported_bound;
+use super::{Accepts, Query, ShadeResult, Shading, Stop, Threshold};
+use crate::ShadeError;
+use crate::geometry::{Aabb, Cone, Surface};
+use crate::lambert::{SharedView, degree_two, shared_width};
+use crate::numeric::{
+    CompensatedSum, DISTANCE_SLACK, POINT_SLACK, SECOND_ORDER_SLACK, SERIES_SLACK,
+};
+use crate::shader::Shader;
+use crate::tree::{LightTree, Node, morton};
+use crate::visibility::Visibility;
+
+/// What a batch call did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct BatchStats {
+    /// Groups of points that shared a cut.
+    pub groups: u32,
+    /// Points shaded through a shared cut.
+    pub shared_points: u32,
+    /// Points shaded on their own: all of them when the call cannot share
+    /// (see [`Shading::shade_batch`]), else those of groups too scattered to
+    /// share and those whose own check missed the threshold.
+    pub points_alone: u32,
+    /// Node bounds computed for the shared cuts (each point's own work is in
+    /// its [`ShadeResult`]).
+    pub shared_evaluations: u64,
+}
+
+impl core::ops::AddAssign for BatchStats {
+    fn add_assign(&mut self, other: Self) {
+        self.groups += other.groups;
+        self.shared_points += other.shared_points;
+        self.points_alone += other.points_alone;
+        self.shared_evaluations += other.shared_evaluations;
+    }
+}
+
+/// Most points in a group.
+const GROUP_POINTS: usize = 64;
+/// Fewest points worth a shared cut: smaller groups are shaded point by
+/// point.
+const GROUP_MIN_POINTS: usize = 4;
+/// A point joins the group being formed only if its normal is within this
+/// distance (`|n - n_first|`, about 29 degrees) of the group's first normal.
+const GROUP_NORMAL_SPREAD: f64 = 0.5;
+/// Shared node bounds allowed per point of a group before it is split.
+const EVALUATIONS_PER_POINT: usize = 256;
+/// Entries (nodes and single lights) a shared cut may hold before its group
+/// is split: each point sums every one of them.
+const MAX_CUT_ITEMS: usize = 2048;
+/// The shared cut aims at this fraction of the representative point's
+/// estimate for a relative target, leaving room for points darker than it.
+const FIRST_MARGIN: f64 = 0.75;
+/// Rounds of further refinement for the points of a group that missed
+/// their target, before they are shaded on their own.
+const ROUNDS: usize = 3;
+
+/// Where a group of points lies: a ball of points and a cone of normals,
+/// all widened for rounding.
+#[derive(Clone, Copy, Debug)]
+struct Group {
+    centre: DVec3,
+    /// Unit (to rounding) mean normal `n0`.
+    normal: DVec3,
+    /// Every point lies within this distance of `centre`.
+    radius: f64,
+    /// Largest `n0 . (p - centre)` over the points, at least 0.
+    rise: f64,
+    /// Largest `n0 . (centre - p)` over the points, at least 0.
+    drop: f64,
+    /// Largest `|n_p - n0|` over the points' exact unit normals.
+    tilt: f64,
+}
+
+impl Group {
+    fn new(surfaces: impl Iterator<Item = Surface> + Clone) -> Self {
+        let (mut sum_p, mut sum_n, mut count) = (DVec3::ZERO, DVec3::ZERO, 0.0);
+        let mut first_normal = DVec3::Z;
+        for s in surfaces.clone() {
+            if count == 0.0 {
+                first_normal = s.normal;
+            }
+            sum_p += s.point;
+            sum_n += s.normal;
+            count += 1.0;
+        }
+        let centre = sum_p / count;
+        let normal = sum_n.try_normalize().unwrap_or(first_normal);
+        let (mut radius, mut rise, mut drop, mut tilt) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for s in surfaces {
+            let offset = s.point - centre;
+            radius = radius.max(offset.length());
+            let height = normal.dot(offset);
+            rise = rise.max(height);
+            drop = drop.max(-height);
+            tilt = tilt.max((s.normal - normal).length());
+        }
+        // Lengths and dots of f64 differences: a few ulps of the magnitudes
+        // involved; the surfaces' unit normals are within a few ulps of the
+        // exact ones.
+        let pad = 8.0 * f64::EPSILON * (centre.abs().max_element() + radius);
+        Self {
+            centre,
+            normal,
+            radius: radius * (1.0 + DISTANCE_SLACK) + pad,
+            rise: rise * (1.0 + DISTANCE_SLACK) + pad,
+            drop: drop * (1.0 + DISTANCE_SLACK) + pad,
+            tilt: tilt * (1.0 + DISTANCE_SLACK) + 16.0 * f64::EPSILON,
+        }
+    }
+
+    /// What every point of the group sees of `node`, at centroid distance
+    /// `distance` from the centre, for [`shared_width`]: the heights
+    /// `n . (c - p)` are within `|n0 . (c - centre)| + max(rise, drop) +
+    /// tilt |c - p|` and `|c - p| <= distance + radius`, so `|c0|` is at most
+    /// that over the nearest distance; the box's heights about the centroid
+    /// along `n0` bound `|n0 . (x - c)|`.
+    fn view(&self, node: &Node, inv_nearest: f64, distance: f64) -> SharedView {
+        let centroid = node.centroid.as_dvec3();
+        let far = (distance + self.radius) * (1.0 + DISTANCE_SLACK);
+        let centre_height = self.normal.dot(centroid - self.centre).abs();
+        let height = centre_height + self.rise.max(self.drop) + self.tilt * far;
+        let cosine = height * (1.0 + DISTANCE_SLACK) * inv_nearest
+            + 16.0 * f64::EPSILON * (centroid.abs().max_element() + far) * inv_nearest;
+        let (lo, hi) = node.aabb.extent_along(centroid, self.normal, SECOND_ORDER_SLACK);
+        SharedView {
+            inv_nearest,
+            cosine,
+            height: lo.abs().max(hi.abs()),
+            tilt: self.tilt,
+        }
+    }
+
+    /// Where members boxed by `aabb` within `reach` of every point lie
+    /// against every point's tangent plane: `Some(true)` strictly above
+    /// all, `Some(false)` strictly below all, `None` either side of some.
+    ///
+    /// For a point `p` with unit normal `n` and a member `x`,
+    /// `n.(x - p) = n0.(x - c) + n0.(c - p) + (n - n0).(x - p)`: the first
+    /// term ranges over the box's extent along `n0`, the second over
+    /// `[-rise, drop]`, the third within `tilt * |x - p|`.
+    #[inline]
+    fn side(&self, aabb: &Aabb, reach: f64) -> Option<bool> {
+        let (lo, hi) = aabb.extent_along(self.centre, self.normal, SECOND_ORDER_SLACK);
+        let spread = self.tilt * reach * (1.0 + DISTANCE_SLACK);
+        let margin = 16.0 * f64::EPSILON * (lo.abs() + hi.abs() + self.rise + self.drop + spread);
+        if lo - self.rise - spread - margin > 0.0 {
+            Some(true)
+        } else if hi + self.drop + spread + margin < 0.0 {
+            Some(false)
+        } else {
+            None
+        }
+    }
+}
+
+/// What a shared cut holds and what it has spent, kept between calls.
+#[derive(Debug, Default)]
+pub(crate) struct BatchScratch {
+    list: ErrorList,
+    /// Single lights of the cut on both sides of some tangent plane,
+    /// evaluated exactly at each point: position and intensity.
+    lights: Vec<(DVec3, DVec3)>,
+    /// Single lights of the cut above every tangent plane: position and
+    /// intensity.
+    above: Vec<(DVec3, DVec3)>,
+    /// The nodes and the lights above every plane, packed for the points'
+    /// sums.
+    packed: Packed,
+    /// Each member's result in the current round.
+    results: Vec<ShadeResult>,
+}
+
+/// One group's cut in the making.
+struct SharedCut<'a, S: Shader> {
+    tree: &'a LightTree,
+    shader: &'a S,
+    kd: DVec3,
+    group: Group,
+    /// The point whose estimates steer a relative target.
+    rep: &'a Surface,
+    rep_per_point: S::PerPoint,
+    /// The representative's values of the cut's single lights.
+    rep_settled: CompensatedSum,
+    /// The shared errors of the single lights above every plane.
+    settled_error: CompensatedSum,
+    evaluations: u64,
+    max_evaluations: u64,
+}
+
+/// The cut grew past its allowance: the group is split.
+struct TooCostly;
+
+impl<S: Shader> SharedCut<'_, S> {
+    /// Puts a single light into the cut unless it is below every point's
+    /// tangent plane.
+    fn light(&mut self, scratch: &mut BatchScratch, position: DVec3, intensity: DVec3) {
+        if intensity == DVec3::ZERO {
+            return;
+        }
+        let at = position.as_vec3();
+        let distance = (position - self.group.centre).length();
+        let reach = distance + self.group.radius;
+        let nearest = distance * (1.0 - DISTANCE_SLACK) - self.group.radius;
+        match self.group.side(&Aabb { min: at, max: at }, reach) {
+            Some(false) => return,
+            // The series of a single light is its exact term; what is left
+            // is the rounding of its cosine and of the offset (see
+            // `SERIES_SLACK` and `POINT_SLACK`), at the nearest distance.
+            Some(true) if nearest > 0.0 => {
+                let inv = 1.0 / nearest;
+                let error = intensity * self.kd * (inv * inv) * (SERIES_SLACK + POINT_SLACK);
+                self.settled_error.add(error);
+                scratch.above.push((position, intensity));
+            }
+            _ => scratch.lights.push((position, intensity)),
+        }
+        self.rep_settled.add(
+            self.shader
+                .eval(&self.rep_per_point, self.rep, position, intensity),
+        );
+    }
+
+    /// Enters node `index`: dropped when dark or below every tangent plane,
+    /// a single light when its radius is 0, else an entry of the error list
+    /// (to be refined whatever its error when the shared bound does not
+    /// apply).
+    fn enter(&mut self, scratch: &mut BatchScratch, index: usize) {
+        let node = &self.tree.nodes[index];
+        if node.intensity == DVec3::ZERO {
+            return;
+        }
+        if node.radius == 0.0 {
+            self.light(scratch, node.centroid.as_dvec3(), node.intensity);
+            return;
+        }
+        self.evaluations += 1;
+        let entry = match self.shared_bound(node) {
+            Ok(Some((estimate, error))) => {
+                Entry::new(Class::Error, index as u32, Seen::Visible, estimate, error)
+            }
+            Ok(None) => return,
+            Err(()) => Entry::new(
+                Class::Unbounded,
+                index as u32,
+                Seen::Visible,
+                DVec3::ZERO,
+                DVec3::ZERO,
+            ),
+        };
+        scratch.list.push(entry);
+    }
+
+    /// The representative's estimate of `node` and the node's error shared
+    /// by every point of the group; `Ok(None)` for a node below every
+    /// tangent plane, `Err(())` for one the shared bound does not cover (its
+    /// ball too near the group, or members on both sides of some tangent
+    /// plane).
+    fn shared_bound(&self, node: &Node) -> Result<Option<(DVec3, DVec3)>, ()> {
+        let group = &self.group;
+        let distance = (node.centroid.as_dvec3() - group.centre).length();
+        let radius = f64::from(node.radius);
+        let reach = distance + radius + group.radius;
+        match group.side(&node.aabb, reach) {
+            Some(true) => {}
+            Some(false) => return Ok(None),
+            None => return Err(()),
+        }
+        // No point comes nearer the centroid than this.
+        let nearest = distance * (1.0 - DISTANCE_SLACK) - group.radius;
+        if !(nearest - radius > nearest * 2.0 * Cone::MIN_CLEARANCE) {
+            return Err(());
+        }
+        let inv_nearest = 1.0 / nearest;
+        let view = group.view(node, inv_nearest, distance);
+        let scale = node.intensity * self.kd * (inv_nearest * inv_nearest);
+        let error = scale * shared_width(node, &view);
+        let cone = node.cone(self.rep.point).ok_or(())?;
+        let estimate = node_estimate(node, self.kd, self.rep, &cone);
+        Ok(Some((estimate, error)))
+    }
+
+    /// The error list's loop over the shared bounds until `met` holds for
+    /// the representative's estimate and the summed error.
+    fn run(
+        &mut self,
+        scratch: &mut BatchScratch,
+        mut met: impl FnMut(DVec3, DVec3, f64) -> bool,
+    ) -> Result<(), TooCostly> {
+        loop {
+            if scratch.list.may_stop() {
+                let largest = scratch.list.largest();
+                let (estimate, error) = scratch.list.sums();
+                if met(self.rep_settled.value() + estimate, error, largest) {
+                    let (estimate, error) = scratch.list.resum();
+                    if met(self.rep_settled.value() + estimate, error, largest) {
+                        return Ok(());
+                    }
+                }
+            }
+            let Some(top) = scratch.list.pop() else {
+                return Ok(());
+            };
+            if self.evaluations > self.max_evaluations
+                || scratch.lights.len() + scratch.above.len() + scratch.list.len() > MAX_CUT_ITEMS
+            {
+                return Err(TooCostly);
+            }
+            let node = &self.tree.nodes[top.node as usize];
+            if node.is_leaf() {
+                for k in node.lights() {
+                    let l = self.tree.lights[k];
+                    self.light(scratch, l.position.as_dvec3(), l.intensity.as_dvec3());
+                }
+            } else {
+                for child in node.children() {
+                    self.enter(scratch, child);
+                }
+            }
+        }
+    }
+}
+
+/// A node's degree-2 series estimate at `surface` with the albedo applied,
+/// as the node bound computes it.
+#[inline]
+fn node_estimate(node: &Node, kd: DVec3, surface: &Surface, cone: &Cone) -> DVec3 {
+    let inv_d = cone.inv_distance;
+    node.intensity * kd * (inv_d * inv_d) * degree_two(surface.normal, cone, node)
+}
+
+/// The certified bound reported for a shared cut's summed `error` whose
+/// points sum `entries` packed estimates: the compensated sums' allowance of
+/// [`reported_bound`], and the lanes' plain sums. A plain sum of `m` terms
+/// is within `m * 2^-53` of the sum of their magnitudes; each term lies
+/// within its error of a non-negative exact value, so that is at most
+/// `m * 2^-53 (exact + error)`: the exact part falls within the rounding
+/// allowance (`m <= 2^16`), the error part is added here.
+fn packed_bound(error: DVec3, entries: usize) -> DVec3 {
+    let lane_terms = (entries / super::packed::LANES + 2) as f64;
+    reported_bound(error) * (1.0 + lane_terms * f64::EPSILON)
+}
+
+/// Indices of `queries` in Morton order of their points over the batch's
+/// bounding cube.
+fn morton_order<M>(queries: &[Query<M>]) -> Vec<u32> {
+    let mut min = DVec3::INFINITY;
+    let mut max = DVec3::NEG_INFINITY;
+    for q in queries {
+        min = min.min(q.surface().point);
+        max = max.max(q.surface().point);
+    }
+    let extent = (max - min).max_element();
+    let cells = f64::from(1u32 << morton::BITS_PER_AXIS);
+    let scale = if extent > 0.0 { cells / extent } else { 0.0 };
+    let top = DVec3::splat(cells - 1.0);
+    let codes: Vec<u64> = queries
+        .iter()
+        .map(|q| {
+            let c = ((q.surface().point - min) * scale).clamp(DVec3::ZERO, top);
+            morton::spread(c.x as u32)
+                | morton::spread(c.y as u32) << 1
+                | morton::spread(c.z as u32) << 2
+        })
+        .collect();
+    morton::sort(&codes)
+}
+
+/// Consecutive runs of `order` forming groups: at most [`GROUP_POINTS`]
+/// points whose normals lie within [`GROUP_NORMAL_SPREAD`] of the run's
+/// first.
+fn group_runs<M>(queries: &[Query<M>], order: &[u32]) -> Vec<Range<usize>> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    while start < order.len() {
+        let first = queries[order[start] as usize].surface().normal;
+        let mut end = start + 1;
+        while end < order.len()
+            && end - start < GROUP_POINTS
+            && (queries[order[end] as usize].surface().normal - first).length()
+                <= GROUP_NORMAL_SPREAD
+        {
+            end += 1;
+        }
+        runs.push(start..end);
+        start = end;
+    }
+    runs
+}
+
+impl<S: Shader> Shading<'_, S> {
+    /// Shades a batch of queries into `results` (one per query, same order),
+    /// each with the certified contract of
+    /// [`shade_query`](Self::shade_query): radiance, certified error bound,
+    /// its own cost, and why it stopped.
+    ///
+    /// Nothing is assumed of the order or layout of the queries; neighbouring
+    /// points (a tile of an image, a patch of surface) share work.
+    ///
+    /// # How points share a cut
+    /// The points are sorted along a Morton curve of their positions and cut
+    /// into runs of at most 64 whose normals lie within about 29 degrees of
+    /// the run's first. For each run the crate picks one cut through the
+    /// tree with the error list, bounding each node once for the whole
+    /// group: nodes below every point's tangent plane drop out, nodes above
+    /// every one are bounded by the degree-2 multipole series with its
+    /// remainder taken at the group's nearest distance to the node (valid for
+    /// every point and every normal), and everything else is refined, down
+    /// to single lights. Each point then sums, at its own position and
+    /// normal, the cut's node estimates and single lights exactly; its
+    /// certified bound is the cut's summed error. The cut aims at the
+    /// target for a representative point with a margin; a point that still
+    /// misses its own target (a darker point under a relative threshold)
+    /// gets up to three further shared refinements and is then shaded on
+    /// its own, as is every point of a run too scattered for a shared cut
+    /// to pay (it is split in two first).
+    ///
+    /// A point's [`ShadeResult::nodes_evaluated`] then counts the node
+    /// estimates it summed (cheaper than bounds) and
+    /// [`lights_evaluated`](ShadeResult::lights_evaluated) the single
+    /// lights; the shared bounds are counted once, in the returned
+    /// [`BatchStats`].
+    ///
+    /// Cuts are shared for shaders that are purely diffuse
+    /// ([`Shader::diffuse_albedo`]), with [`Unoccluded`](crate::Unoccluded)
+    /// visibility and a threshold without a budget, maximal contribution or
+    /// interpolation. Otherwise every point is shaded on its own, with the
+    /// same results as calling [`shade_query`](Self::shade_query) for each.
+    ///
+    /// # Errors
+    /// [`ShadeError::BatchLength`] when `results` is not as long as
+    /// `queries`; the threshold errors of [`shade_query`](Self::shade_query).
+    pub fn shade_batch<M, V: Visibility>(
+        &mut self,
+        queries: &[Query<M>],
+        threshold: Threshold,
+        mut visibility: V,
+        results: &mut [ShadeResult],
+    ) -> Result<BatchStats, ShadeError>
+    where
+        S: Accepts<M>,
+    {
+        if queries.len() != results.len() {
+            return Err(ShadeError::BatchLength {
+                queries: queries.len(),
+                results: results.len(),
+            });
+        }
+        threshold.check()?;
+        let mut stats = BatchStats::default();
+        if !self.shares::<V>(&threshold) {
+            for (query, result) in queries.iter().zip(results.iter_mut()) {
+                *result = self.shade_query(query, threshold, &mut visibility)?;
+            }
+            stats.points_alone = queries.len() as u32;
+            return Ok(stats);
+        }
+        let order = morton_order(queries);
+        for run in group_runs(queries, &order) {
+            self.shade_members(
+                queries,
+                &order[run],
+                threshold,
+                &mut visibility,
+                &mut |i, r| results[i] = r,
+                &mut stats,
+            )?;
+        }
+        Ok(stats)
+    }
+
+    /// Whether a batch call with this threshold and visibility shares cuts.
+    fn shares<V: Visibility>(&self, threshold: &Threshold) -> bool {
+        V::ALWAYS_VISIBLE
+            && self.shader.diffuse_albedo().is_some()
+            && threshold.budget().is_none()
+            && threshold.max_contribution().is_none()
+            && threshold.interpolation().is_none()
+    }
+
+    /// Shades the queries `members` (indices into `queries`) as one group,
+    /// split in two while a shared cut does not pay; each result goes to
+    /// `write(index, result)`.
+    fn shade_members<M, V: Visibility>(
+        &mut self,
+        queries: &[Query<M>],
+        members: &[u32],
+        threshold: Threshold,
+        visibility: &mut V,
+        write: &mut impl FnMut(usize, ShadeResult),
+        stats: &mut BatchStats,
+    ) -> Result<(), ShadeError>
+    where
+        S: Accepts<M>,
+    {
+        if members.len() < GROUP_MIN_POINTS {
+            for &i in members {
+                let i = i as usize;
+                write(i, self.shade_query(&queries[i], threshold, &mut *visibility)?);
+            }
+            stats.points_alone += members.len() as u32;
+            return Ok(());
+        }
+        match self.shade_shared(queries, members, &threshold, stats) {
+            Ok(alone) => {
+                for (k, &i) in members.iter().enumerate() {
+                    let i = i as usize;
+                    if alone[k] {
+                        write(i, self.shade_query(&queries[i], threshold, &mut *visibility)?);
+                    } else {
+                        write(i, self.scratch.batch.results[k]);
+                    }
+                }
+                Ok(())
+            }
+            Err(TooCostly) => {
+                let (a, b) = members.split_at(members.len() / 2);
+                self.shade_members(queries, a, threshold, visibility, write, stats)?;
+                self.shade_members(queries, b, threshold, visibility, write, stats)
+            }
+        }
+    }
+
+    /// Picks a shared cut for `members` and shades them through it; fills
+    /// the scratch results and returns which members still need shading on
+    /// their own.
+    fn shade_shared<M>(
+        &mut self,
+        queries: &[Query<M>],
+        members: &[u32],
+        threshold: &Threshold,
+        stats: &mut BatchStats,
+    ) -> Result<Vec<bool>, TooCostly> {
+        let Some(kd) = self.shader.diffuse_albedo() else {
+            return Err(TooCostly);
+        };
+        let surfaces = members.iter().map(|&i| *queries[i as usize].surface());
+        let group = Group::new(surfaces);
+        let rep = queries[members[0] as usize].surface();
+        let mut scratch = core::mem::take(&mut self.scratch.batch);
+        let outcome = self.shared_cut(queries, members, threshold, stats, kd, group, rep, &mut scratch);
+        self.scratch.batch = scratch;
+        outcome
+    }
+
+    /// [`shade_shared`](Self::shade_shared) with its scratch taken out.
+    #[allow(clippy::too_many_arguments)]
+    fn shared_cut<M>(
+        &self,
+        queries: &[Query<M>],
+        members: &[u32],
+        threshold: &Threshold,
+        stats: &mut BatchStats,
+        kd: DVec3,
+        group: Group,
+        rep: &Surface,
+        scratch: &mut BatchScratch,
+    ) -> Result<Vec<bool>, TooCostly> {
+        scratch.list.clear();
+        scratch.lights.clear();
+        scratch.above.clear();
+        let mut cut = SharedCut {
+            tree: self.tree,
+            shader: &self.shader,
+            kd,
+            group,
+            rep,
+            rep_per_point: self.shader.prepare(rep),
+            rep_settled: CompensatedSum::default(),
+            settled_error: CompensatedSum::default(),
+            evaluations: 0,
+            max_evaluations: (members.len() * EVALUATIONS_PER_POINT) as u64,
+        };
+        if !self.tree.nodes.is_empty() {
+            cut.enter(scratch, 0);
+        }
+        let mut margin = FIRST_MARGIN;
+        let mut alone = vec![false; members.len()];
+        scratch.results.clear();
+        scratch.results.resize(members.len(), ShadeResult::EMPTY);
+        for round in 0..ROUNDS {
+            let outcome = cut.run(scratch, |estimate, error, largest| {
+                threshold.met(estimate * margin, reported_bound(error), largest)
+            });
+            stats.shared_evaluations += cut.evaluations;
+            cut.evaluations = 0;
+            outcome?;
+            // The points' sums over the cut.
+            let (rep_estimate, error) = scratch.list.resum();
+            scratch.packed.clear();
+            for e in scratch.list.waiting() {
+                scratch.packed.push_node(&self.tree.nodes[e.node as usize], kd);
+            }
+            for &(position, intensity) in &scratch.above {
+                scratch.packed.push_light(position, intensity * kd);
+            }
+            let bound = packed_bound(error + cut.settled_error.value(), scratch.packed.len());
+            let largest = scratch.list.largest();
+            let nodes = scratch.list.len() as u32;
+            let lights = (scratch.lights.len() + scratch.above.len()) as u32;
+            let mut darkest = f64::INFINITY;
+            for (k, &i) in members.iter().enumerate() {
+                let surface = queries[i as usize].surface();
+                let radiance = self.point_sum(surface, scratch);
+                scratch.results[k] = ShadeResult {
+                    radiance,
+                    error_bound: bound,
+                    nodes_evaluated: nodes,
+                    lights_evaluated: lights,
+                    classify_queries: 0,
+                    point_queries: 0,
+                    stop: Stop::ThresholdMet,
+                };
+                alone[k] = !threshold.met(radiance, bound, largest);
+                if alone[k] {
+                    darkest = darkest.min(radiance.max_element());
+                }
+            }
+            let reference = (cut.rep_settled.value() + rep_estimate).max_element();
+            if darkest == f64::INFINITY || round + 1 == ROUNDS {
+                break;
+            }
+            // Aim below the darkest point that missed, if it is bright
+            // enough to be worth it.
+            let next = 0.9 * darkest / reference;
+            if !(next > 0.05 * margin && next < margin) {
+                break;
+            }
+            margin = next;
+        }
+        let shared = alone.iter().filter(|a| !**a).count() as u32;
+        stats.groups += 1;
+        stats.shared_points += shared;
+        stats.points_alone += members.len() as u32 - shared;
+        Ok(alone)
+    }
+
+    /// One point's sum over the shared cut in `scratch`, clamped at 0 (the
+    /// exact value is non-negative).
+    fn point_sum(&self, surface: &Surface, scratch: &BatchScratch) -> DVec3 {
+        let mut sum = CompensatedSum::default();
+        if !scratch.lights.is_empty() {
+            let per_point = self.shader.prepare(surface);
+            for &(position, intensity) in &scratch.lights {
+                sum.add(self.shader.eval(&per_point, surface, position, intensity));
+            }
+        }
+        sum.add(scratch.packed.sum(surface.point, surface.normal));
+        sum.value().max(DVec3::ZERO)
+    }
+}

@@ -1,0 +1,264 @@
+//! Batch shading: every point of a batch keeps the certified contract, for
+//! coherent patches and scattered points, both shaders, with and without
+//! occluders; points share cuts where they can.
+
+mod common;
+
+use common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
+use glam::Vec3;
+use manylights::{
+    Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeError,
+    ShadeResult, Threshold, Unoccluded, Visibility,
+};
+use proptest::prelude::*;
+
+/// A coherent patch: `count` points within `radius` of `centre`, spread in
+/// the plane across `normal` with a little relief, normals tilted from
+/// `normal` by up to `tilt` (radians, roughly).
+fn patch() -> impl Strategy<Value = Vec<(Vec3, Vec3)>> {
+    (
+        vec_in(12.0),
+        direction(),
+        0.001f32..=3.0,
+        0.0f32..=0.6,
+        prop::collection::vec((-1.0f32..=1.0, -1.0f32..=1.0, -0.05f32..=0.05, vec_in(1.0)), 1..=150),
+    )
+        .prop_map(|(centre, normal, radius, tilt, offsets)| {
+            let n = normal.normalize();
+            let (u, v) = n.any_orthonormal_pair();
+            offsets
+                .into_iter()
+                .map(|(a, b, h, wobble)| {
+                    let p = centre + (u * a + v * b + n * h) * radius;
+                    (p, n + wobble * tilt)
+                })
+                .collect()
+        })
+}
+
+/// Points anywhere in the cube of half-size 12, normals anywhere.
+fn scattered() -> impl Strategy<Value = Vec<(Vec3, Vec3)>> {
+    prop::collection::vec((vec_in(12.0), direction()), 1..=80)
+}
+
+/// Queries for `points`, skipping any whose jittered normal came out zero.
+fn queries(points: &[(Vec3, Vec3)]) -> Vec<Query> {
+    points
+        .iter()
+        .filter_map(|&(p, n)| Query::new(p, n).ok())
+        .collect()
+}
+
+/// Every result of a batch against the exact sum of its own query.
+fn check_batch<S: manylights::Shader + manylights::ViewIndependent + Copy>(
+    light_set: &[PointLight],
+    shader: S,
+    points: &[(Vec3, Vec3)],
+    t: Threshold,
+) -> Result<(), TestCaseError> {
+    let tree = LightTree::build(light_set).unwrap();
+    let mut shading = tree.shading(shader);
+    let qs = queries(points);
+    let mut results = vec![placeholder(); qs.len()];
+    let stats = shading.shade_batch(&qs, t, Unoccluded, &mut results).unwrap();
+    if std::env::var("BATCH_DEBUG").is_ok() { eprintln!("STATS {} {} {}", stats.shared_points, stats.points_alone, stats.groups); }
+    for (q, r) in qs.iter().zip(&results) {
+        check_bound(r, shading.exact_query(q, Unoccluded))?;
+        check_threshold(r, &t)?;
+    }
+    Ok(())
+}
+
+/// A result to be overwritten.
+fn placeholder() -> ShadeResult {
+    let tree = LightTree::build(&[PointLight::new(Vec3::Z, Vec3::ONE)]).unwrap();
+    tree.shading(Lambert::new(Vec3::ONE))
+        .shade(Vec3::ZERO, Vec3::Z, Threshold::exact())
+        .unwrap()
+}
+
+proptest! {
+    #![proptest_config(cases(96))]
+
+    #[test]
+    fn coherent_patches_keep_the_contract(
+        light_set in lights(2000),
+        points in patch(),
+        t in threshold(),
+        kd in vec_in(1.0).prop_map(|v| v.abs()),
+    ) {
+        check_batch(&light_set, Lambert::new(kd), &points, t)?;
+    }
+
+    #[test]
+    fn scattered_points_keep_the_contract(
+        light_set in lights(2000),
+        points in scattered(),
+        t in threshold(),
+    ) {
+        check_batch(&light_set, Lambert::new(Vec3::new(0.7, 0.5, 0.3)), &points, t)?;
+    }
+
+    #[test]
+    fn two_diffuse_terms_share_as_one(
+        light_set in lights(1000),
+        points in patch(),
+        t in threshold(),
+    ) {
+        let shader = Combined::new(Lambert::new(Vec3::splat(0.3)), Lambert::new(Vec3::new(0.1, 0.4, 0.0)));
+        check_batch(&light_set, shader, &points, t)?;
+    }
+
+    #[test]
+    fn glossy_batches_keep_the_contract(
+        light_set in lights(1000),
+        points in patch(),
+        views in prop::collection::vec(direction(), 150),
+        t in threshold(),
+        exponent in 1.0f32..=200.0,
+    ) {
+        let tree = LightTree::build(&light_set).unwrap();
+        let shader = Combined::new(Lambert::new(Vec3::splat(0.5)), Phong::new(Vec3::splat(0.5), exponent));
+        let mut shading = tree.shading(shader);
+        let qs: Vec<_> = queries(&points)
+            .into_iter()
+            .zip(&views)
+            .filter_map(|(q, &v)| q.with_view(v).ok())
+            .collect();
+        let mut results = vec![placeholder(); qs.len()];
+        shading.shade_batch(&qs, t, Unoccluded, &mut results).unwrap();
+        for (q, r) in qs.iter().zip(&results) {
+            check_bound(r, shading.exact_query(q, Unoccluded))?;
+            check_threshold(r, &t)?;
+        }
+    }
+
+    #[test]
+    fn batches_with_occluders_keep_the_contract(
+        light_set in lights(1000),
+        points in patch(),
+        t in threshold(),
+        wall in -8.0f32..=8.0,
+    ) {
+        let tree = LightTree::build(&light_set).unwrap();
+        let mut shading = tree.shading(Lambert::new(Vec3::ONE));
+        let qs = queries(&points);
+        let mut results = vec![placeholder(); qs.len()];
+        let mut host = Wall { x: wall };
+        shading.shade_batch(&qs, t, &mut host, &mut results).unwrap();
+        for (q, r) in qs.iter().zip(&results) {
+            check_bound(r, shading.exact_query(q, &mut host))?;
+            check_threshold(r, &t)?;
+        }
+    }
+}
+
+/// An infinite wall in the plane `x = self.x`: a light is hidden when the
+/// segment to it crosses the plane.
+struct Wall {
+    x: f32,
+}
+
+impl Wall {
+    fn side(&self, p: Vec3) -> bool {
+        p.x < self.x
+    }
+}
+
+impl Visibility for Wall {
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
+        let (lo, hi) = (self.side(node.aabb.min), self.side(node.aabb.max));
+        let here = self.side(point);
+        if lo == here && hi == here {
+            Coverage::Visible
+        } else if lo != here && hi != here {
+            Coverage::Occluded
+        } else {
+            Coverage::Partial
+        }
+    }
+
+    fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
+        self.side(point) == self.side(light)
+    }
+}
+
+/// A street of lamps and a patch of road under it, large enough that
+/// sharing pays.
+fn street_patch() -> (LightTree, Vec<Query>) {
+    let lights: Vec<PointLight> = (0..20_000)
+        .map(|i| {
+            let (x, side) = ((i / 2) as f32 * 3.0, if i % 2 == 0 { -6.0 } else { 6.0 });
+            PointLight::new(Vec3::new(x, side, 5.0), Vec3::new(1.0, 0.6, 0.3) * 50.0)
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let queries = (0..256)
+        .map(|k| {
+            let (a, b) = ((k % 16) as f32, (k / 16) as f32);
+            Query::new(Vec3::new(1000.0 + a * 0.25, -2.0 + b * 0.25, 0.0), Vec3::Z).unwrap()
+        })
+        .collect();
+    (tree, queries)
+}
+
+#[test]
+fn a_coherent_patch_shares_its_cuts_and_meets_its_threshold() {
+    let (tree, queries) = street_patch();
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(0.8)));
+    let t = Threshold::relative(0.01);
+    let mut results = vec![placeholder(); queries.len()];
+    let stats = shading
+        .shade_batch(&queries, t, Unoccluded, &mut results)
+        .unwrap();
+    assert!(stats.groups >= 1, "{stats:?}");
+    assert!(
+        stats.shared_points as usize >= queries.len() * 9 / 10,
+        "{stats:?}"
+    );
+    for (q, r) in queries.iter().zip(&results) {
+        let exact = shading.exact_query(q, Unoccluded);
+        assert!(r.certifies(exact), "{r:?} against {exact}");
+        assert!(r.error_bound.max_element() <= 0.01 * r.radiance.max_element());
+    }
+    // A point shaded through a shared cut sums fewer node estimates than
+    // the whole tree has lights.
+    assert!(results.iter().all(|r| (r.cost() as usize) < 20_000));
+}
+
+#[test]
+fn settings_that_cannot_share_give_the_single_point_results() {
+    let (tree, queries) = street_patch();
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(0.8)));
+    let t = Threshold::relative(0.01).with_budget(300);
+    let mut results = vec![placeholder(); queries.len()];
+    let stats = shading
+        .shade_batch(&queries, t, Unoccluded, &mut results)
+        .unwrap();
+    assert_eq!(stats.points_alone as usize, queries.len());
+    for (q, r) in queries.iter().zip(&results) {
+        assert_eq!(*r, shading.shade_query(q, t, Unoccluded).unwrap());
+    }
+}
+
+#[test]
+fn a_results_slice_of_the_wrong_length_is_an_error() {
+    let (tree, queries) = street_patch();
+    let mut shading = tree.shading(Lambert::new(Vec3::ONE));
+    let mut results = vec![placeholder(); 3];
+    let e = shading.shade_batch(&queries, Threshold::relative(0.01), Unoccluded, &mut results);
+    assert_eq!(
+        e,
+        Err(ShadeError::BatchLength {
+            queries: 256,
+            results: 3
+        })
+    );
+    let e = shading.shade_batch(&queries[..3], Threshold::relative(f64::NAN), Unoccluded, &mut results);
+    assert!(matches!(e, Err(ShadeError::InvalidThreshold(_))));
+    // An empty batch is fine.
+    let stats = shading
+        .shade_batch::<_, _>(&queries[..0], Threshold::relative(0.01), Unoccluded, &mut [])
+        .unwrap();
+    assert_eq!(stats.shared_points + stats.points_alone, 0);
+}
