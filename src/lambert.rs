@@ -576,7 +576,6 @@ impl Lambert {
     }
 }
 
-
 /// What a group of shading points knows of a node's geometry for
 /// [`shared_width`], as upper bounds over every point `p` of the group and
 /// its exact unit normal `n`.

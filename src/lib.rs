@@ -142,7 +142,7 @@
 //!
 //! None yet: the crate depends only on `glam`, `smallvec` and `thiserror`.
 
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 
 mod error;
 mod geometry;

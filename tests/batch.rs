@@ -21,7 +21,10 @@ fn patch() -> impl Strategy<Value = Vec<(Vec3, Vec3)>> {
         direction(),
         0.001f32..=3.0,
         0.0f32..=0.6,
-        prop::collection::vec((-1.0f32..=1.0, -1.0f32..=1.0, -0.05f32..=0.05, vec_in(1.0)), 1..=150),
+        prop::collection::vec(
+            (-1.0f32..=1.0, -1.0f32..=1.0, -0.05f32..=0.05, vec_in(1.0)),
+            1..=150,
+        ),
     )
         .prop_map(|(centre, normal, radius, tilt, offsets)| {
             let n = normal.normalize();
@@ -60,8 +63,15 @@ fn check_batch<S: manylights::Shader + manylights::ViewIndependent + Copy>(
     let mut shading = tree.shading(shader);
     let qs = queries(points);
     let mut results = vec![placeholder(); qs.len()];
-    let stats = shading.shade_batch(&qs, t, Unoccluded, &mut results).unwrap();
-    if std::env::var("BATCH_DEBUG").is_ok() { eprintln!("STATS {} {} {}", stats.shared_points, stats.points_alone, stats.groups); }
+    let stats = shading
+        .shade_batch(&qs, t, Unoccluded, &mut results)
+        .unwrap();
+    if std::env::var("BATCH_DEBUG").is_ok() {
+        eprintln!(
+            "STATS {} {} {}",
+            stats.shared_points, stats.points_alone, stats.groups
+        );
+    }
     for (q, r) in qs.iter().zip(&results) {
         check_bound(r, shading.exact_query(q, Unoccluded))?;
         check_threshold(r, &t)?;
@@ -246,7 +256,12 @@ fn a_results_slice_of_the_wrong_length_is_an_error() {
     let (tree, queries) = street_patch();
     let mut shading = tree.shading(Lambert::new(Vec3::ONE));
     let mut results = vec![placeholder(); 3];
-    let e = shading.shade_batch(&queries, Threshold::relative(0.01), Unoccluded, &mut results);
+    let e = shading.shade_batch(
+        &queries,
+        Threshold::relative(0.01),
+        Unoccluded,
+        &mut results,
+    );
     assert_eq!(
         e,
         Err(ShadeError::BatchLength {
@@ -254,11 +269,21 @@ fn a_results_slice_of_the_wrong_length_is_an_error() {
             results: 3
         })
     );
-    let e = shading.shade_batch(&queries[..3], Threshold::relative(f64::NAN), Unoccluded, &mut results);
+    let e = shading.shade_batch(
+        &queries[..3],
+        Threshold::relative(f64::NAN),
+        Unoccluded,
+        &mut results,
+    );
     assert!(matches!(e, Err(ShadeError::InvalidThreshold(_))));
     // An empty batch is fine.
     let stats = shading
-        .shade_batch::<_, _>(&queries[..0], Threshold::relative(0.01), Unoccluded, &mut [])
+        .shade_batch::<_, _>(
+            &queries[..0],
+            Threshold::relative(0.01),
+            Unoccluded,
+            &mut [],
+        )
         .unwrap();
     assert_eq!(stats.shared_points + stats.points_alone, 0);
 }

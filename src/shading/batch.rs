@@ -133,7 +133,9 @@ impl Group {
         let height = centre_height + self.rise.max(self.drop) + self.tilt * far;
         let cosine = height * (1.0 + DISTANCE_SLACK) * inv_nearest
             + 16.0 * f64::EPSILON * (centroid.abs().max_element() + far) * inv_nearest;
-        let (lo, hi) = node.aabb.extent_along(centroid, self.normal, SECOND_ORDER_SLACK);
+        let (lo, hi) = node
+            .aabb
+            .extent_along(centroid, self.normal, SECOND_ORDER_SLACK);
         SharedView {
             inv_nearest,
             cosine,
@@ -507,7 +509,10 @@ impl<S: Shader> Shading<'_, S> {
         if members.len() < GROUP_MIN_POINTS {
             for &i in members {
                 let i = i as usize;
-                write(i, self.shade_query(&queries[i], threshold, &mut *visibility)?);
+                write(
+                    i,
+                    self.shade_query(&queries[i], threshold, &mut *visibility)?,
+                );
             }
             stats.points_alone += members.len() as u32;
             return Ok(());
@@ -517,7 +522,10 @@ impl<S: Shader> Shading<'_, S> {
                 for (k, &i) in members.iter().enumerate() {
                     let i = i as usize;
                     if alone[k] {
-                        write(i, self.shade_query(&queries[i], threshold, &mut *visibility)?);
+                        write(
+                            i,
+                            self.shade_query(&queries[i], threshold, &mut *visibility)?,
+                        );
                     } else {
                         write(i, self.scratch.batch.results[k]);
                     }
@@ -549,7 +557,16 @@ impl<S: Shader> Shading<'_, S> {
         let group = Group::new(surfaces);
         let rep = queries[members[0] as usize].surface();
         let mut scratch = core::mem::take(&mut self.scratch.batch);
-        let outcome = self.shared_cut(queries, members, threshold, stats, kd, group, rep, &mut scratch);
+        let outcome = self.shared_cut(
+            queries,
+            members,
+            threshold,
+            stats,
+            kd,
+            group,
+            rep,
+            &mut scratch,
+        );
         self.scratch.batch = scratch;
         outcome
     }
@@ -600,10 +617,14 @@ impl<S: Shader> Shading<'_, S> {
             let (rep_estimate, error) = scratch.list.resum();
             scratch.packed.clear();
             for e in scratch.list.waiting() {
-                scratch.packed.push_node(&self.tree.nodes[e.node as usize], kd);
+                scratch
+                    .packed
+                    .push_node(&self.tree.nodes[e.node as usize], kd);
             }
             for &(position, intensity) in &scratch.above {
-                scratch.packed.push_light(position, intensity * kd);
+                scratch
+                    .packed
+                    .push_light(position.as_vec3(), intensity * kd);
             }
             let bound = packed_bound(error + cut.settled_error.value(), scratch.packed.len());
             let largest = scratch.list.largest();

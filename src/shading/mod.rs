@@ -4,9 +4,9 @@
 
 mod batch;
 mod blend;
-mod packed;
 mod error_list;
 mod exact;
+mod packed;
 mod query;
 mod refine;
 mod result;
