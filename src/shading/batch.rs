@@ -12,7 +12,7 @@ use super::refine::reported_bound;
 use super::{Accepts, Query, ShadeResult, Shading, Stop, Threshold};
 use crate::ShadeError;
 use crate::geometry::{Aabb, Cone, Surface};
-use crate::lambert::{SharedView, degree_two, shared_width};
+use crate::lambert::{SharedView, shared_width};
 use crate::numeric::{
     CompensatedSum, DISTANCE_SLACK, POINT_SLACK, SECOND_ORDER_SLACK, SERIES_SLACK,
 };
@@ -54,14 +54,18 @@ const GROUP_MIN_POINTS: usize = 4;
 /// A point joins the group being formed only if its normal is within this
 /// distance (`|n - n_first|`, about 29 degrees) of the group's first normal.
 const GROUP_NORMAL_SPREAD: f64 = 0.5;
-/// Shared node bounds allowed per point of a group before it is split.
-const EVALUATIONS_PER_POINT: usize = 256;
-/// Entries (nodes and single lights) a shared cut may hold before its group
-/// is split: each point sums every one of them.
-const MAX_CUT_ITEMS: usize = 2048;
+/// What a group's shared cut may cost, per point, in node bounds, before
+/// the group is split: about what a point shaded on its own costs.
+const BUDGET_PER_POINT: u64 = 100;
+/// Entries a point sums over a shared cut in the time of one shared node
+/// bound (measured: about 50 instructions an entry, 1,500 a bound).
+const ENTRIES_PER_BOUND: u64 = 32;
+/// Most entries in a shared cut: the lanes' sums are certified up to
+/// `2^16` terms (see `packed_bound`).
+const MAX_CUT_ITEMS: usize = 1 << 15;
 /// The shared cut aims at this fraction of the representative point's
 /// estimate for a relative target, leaving room for points darker than it.
-const FIRST_MARGIN: f64 = 0.75;
+const FIRST_MARGIN: f64 = 0.9;
 /// Rounds of further refinement for the points of a group that missed
 /// their target, before they are shaded on their own.
 const ROUNDS: usize = 3;
@@ -145,26 +149,102 @@ impl Group {
     }
 
     /// Where members boxed by `aabb` within `reach` of every point lie
-    /// against every point's tangent plane: `Some(true)` strictly above
-    /// all, `Some(false)` strictly below all, `None` either side of some.
+    /// against every point's tangent plane.
     ///
     /// For a point `p` with unit normal `n` and a member `x`,
     /// `n.(x - p) = n0.(x - c) + n0.(c - p) + (n - n0).(x - p)`: the first
     /// term ranges over the box's extent along `n0`, the second over
     /// `[-rise, drop]`, the third within `tilt * |x - p|`.
     #[inline]
-    fn side(&self, aabb: &Aabb, reach: f64) -> Option<bool> {
+    fn side(&self, aabb: &Aabb, reach: f64) -> Side {
         let (lo, hi) = aabb.extent_along(self.centre, self.normal, SECOND_ORDER_SLACK);
+        self.side_of(lo, hi, reach)
+    }
+
+    /// [`side`](Self::side) for members whose heights `n0 . (x - centre)`
+    /// lie in `[lo, hi]` up to the rounding of an `f64` dot product of
+    /// a difference (covered by the margin).
+    #[inline]
+    fn side_of(&self, lo: f64, hi: f64, reach: f64) -> Side {
         let spread = self.tilt * reach * (1.0 + DISTANCE_SLACK);
-        let margin = 16.0 * f64::EPSILON * (lo.abs() + hi.abs() + self.rise + self.drop + spread);
-        if lo - self.rise - spread - margin > 0.0 {
-            Some(true)
+        let margin =
+            16.0 * f64::EPSILON * (lo.abs() + hi.abs() + self.rise + self.drop + spread + reach);
+        let lowest = lo - self.rise - spread - margin;
+        if lowest > 0.0 {
+            Side::Above(lowest)
         } else if hi + self.drop + spread + margin < 0.0 {
-            Some(false)
+            Side::Below
         } else {
-            None
+            Side::Across
         }
     }
+
+    /// A lower bound on the distance from every point to a member at least
+    /// `distance` from the centre and at least `lowest` above every
+    /// tangent plane (a unit normal's height is at most the distance).
+    #[inline]
+    fn nearest(&self, distance: f64, lowest: f64) -> f64 {
+        (distance * (1.0 - DISTANCE_SLACK) - self.radius).max(lowest)
+    }
+}
+
+/// Where members lie against the tangent planes of a group's points.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Side {
+    /// Strictly above every plane, each member at least this high.
+    Above(f64),
+    /// Strictly below every plane: they contribute exactly 0.
+    Below,
+    /// On both sides of some plane.
+    Across,
+}
+
+/// Points of a group whose estimates steer the shared cut's relative
+/// target: at most [`SAMPLES`] spread along the group's Morton order.
+#[derive(Clone, Copy, Debug)]
+struct Samples {
+    points: [DVec3; SAMPLES],
+    normals: [DVec3; SAMPLES],
+}
+
+/// Points steering a shared cut.
+const SAMPLES: usize = 4;
+
+impl Samples {
+    fn new<M>(queries: &[Query<M>], members: &[u32]) -> Self {
+        let last = members.len() - 1;
+        let pick = |k: usize| queries[members[k * last / (SAMPLES - 1)] as usize].surface();
+        Self {
+            points: core::array::from_fn(|k| pick(k).point),
+            normals: core::array::from_fn(|k| pick(k).normal),
+        }
+    }
+
+    /// A virtual light's value `I kd max(0, n.w) / d^2` at each sample
+    /// (`intensity` already times `kd`): an estimate good enough to steer.
+    #[inline]
+    fn values(&self, position: DVec3, intensity: DVec3) -> [DVec3; SAMPLES] {
+        core::array::from_fn(|k| {
+            let u = position - self.points[k];
+            let d2 = u.length_squared();
+            if d2 > 0.0 {
+                intensity * (self.normals[k].dot(u).max(0.0) / (d2 * d2.sqrt()))
+            } else {
+                DVec3::ZERO
+            }
+        })
+    }
+}
+
+/// The sum of the darkest sample (smallest largest channel).
+fn darkest(sums: &[DVec3; SAMPLES]) -> DVec3 {
+    let mut least = sums[0];
+    for s in &sums[1..] {
+        if s.max_element() < least.max_element() {
+            least = *s;
+        }
+    }
+    least
 }
 
 /// What a shared cut holds and what it has spent, kept between calls.
@@ -175,63 +255,70 @@ pub(crate) struct BatchScratch {
     /// evaluated exactly at each point: position and intensity.
     lights: Vec<(DVec3, DVec3)>,
     /// Single lights of the cut above every tangent plane: position and
-    /// intensity.
+    /// intensity times `kd`.
     above: Vec<(DVec3, DVec3)>,
     /// The nodes and the lights above every plane, packed for the points'
     /// sums.
     packed: Packed,
+    /// Each entry's values at the samples, by slot.
+    steer: Vec<[DVec3; SAMPLES]>,
     /// Each member's result in the current round.
     results: Vec<ShadeResult>,
 }
 
 /// One group's cut in the making.
-struct SharedCut<'a, S: Shader> {
+struct SharedCut<'a> {
     tree: &'a LightTree,
-    shader: &'a S,
     kd: DVec3,
     group: Group,
-    /// The point whose estimates steer a relative target.
-    rep: &'a Surface,
-    rep_per_point: S::PerPoint,
-    /// The representative's values of the cut's single lights.
-    rep_settled: CompensatedSum,
-    /// The shared errors of the single lights above every plane.
-    settled_error: CompensatedSum,
+    /// The points whose estimates steer a relative target.
+    samples: Samples,
+    /// The samples' values of the cut's single lights.
+    steer_settled: [DVec3; SAMPLES],
+    /// The summed errors of the single lights above every plane (times
+    /// `kd`), summed plainly (see [`packed_bound`]).
+    light_error: DVec3,
+    /// Running sums of the samples' values of the waiting entries.
+    steer_waiting: [DVec3; SAMPLES],
     evaluations: u64,
-    max_evaluations: u64,
+    /// Points in the group.
+    points: u64,
 }
 
 /// The cut grew past its allowance: the group is split.
 struct TooCostly;
 
-impl<S: Shader> SharedCut<'_, S> {
+impl SharedCut<'_> {
     /// Puts a single light into the cut unless it is below every point's
     /// tangent plane.
     fn light(&mut self, scratch: &mut BatchScratch, position: DVec3, intensity: DVec3) {
         if intensity == DVec3::ZERO {
             return;
         }
-        let at = position.as_vec3();
-        let distance = (position - self.group.centre).length();
-        let reach = distance + self.group.radius;
-        let nearest = distance * (1.0 - DISTANCE_SLACK) - self.group.radius;
-        match self.group.side(&Aabb { min: at, max: at }, reach) {
-            Some(false) => return,
+        let offset = position - self.group.centre;
+        let distance = offset.length();
+        let height = self.group.normal.dot(offset);
+        let scaled = intensity * self.kd;
+        match self
+            .group
+            .side_of(height, height, distance + self.group.radius)
+        {
+            Side::Below => return,
             // The series of a single light is its exact term; what is left
             // is the rounding of its cosine and of the offset (see
             // `SERIES_SLACK` and `POINT_SLACK`), at the nearest distance.
-            Some(true) if nearest > 0.0 => {
-                let inv = 1.0 / nearest;
-                let error = intensity * self.kd * (inv * inv) * (SERIES_SLACK + POINT_SLACK);
-                self.settled_error.add(error);
-                scratch.above.push((position, intensity));
+            Side::Above(lowest) => {
+                let inv = 1.0 / self.group.nearest(distance, lowest);
+                self.light_error += scaled * ((inv * inv) * (SERIES_SLACK + POINT_SLACK));
+                scratch.above.push((position, scaled));
             }
-            _ => scratch.lights.push((position, intensity)),
+            // Evaluated by the shader at each point.
+            Side::Across => scratch.lights.push((position, intensity)),
         }
-        self.rep_settled.add(
-            self.shader
-                .eval(&self.rep_per_point, self.rep, position, intensity),
-        );
+        let values = self.samples.values(position, scaled);
+        for (sum, v) in self.steer_settled.iter_mut().zip(values) {
+            *sum += v;
+        }
     }
 
     /// Enters node `index`: dropped when dark or below every tangent plane,
@@ -248,49 +335,82 @@ impl<S: Shader> SharedCut<'_, S> {
             return;
         }
         self.evaluations += 1;
-        let entry = match self.shared_bound(node) {
-            Ok(Some((estimate, error))) => {
-                Entry::new(Class::Error, index as u32, Seen::Visible, estimate, error)
-            }
+        let (entry, values) = match self.shared_bound(node) {
+            Ok(Some(error)) => (
+                Entry::new(
+                    Class::Error,
+                    index as u32,
+                    Seen::Visible,
+                    DVec3::ZERO,
+                    error,
+                ),
+                self.samples
+                    .values(node.centroid.as_dvec3(), node.intensity * self.kd),
+            ),
             Ok(None) => return,
-            Err(()) => Entry::new(
-                Class::Unbounded,
-                index as u32,
-                Seen::Visible,
-                DVec3::ZERO,
-                DVec3::ZERO,
+            Err(()) => (
+                Entry::new(
+                    Class::Unbounded,
+                    index as u32,
+                    Seen::Visible,
+                    DVec3::ZERO,
+                    DVec3::ZERO,
+                ),
+                [DVec3::ZERO; SAMPLES],
             ),
         };
-        scratch.list.push(entry);
+        let slot = scratch.list.push(entry) as usize;
+        debug_assert_eq!(slot, scratch.steer.len());
+        scratch.steer.push(values);
+        for (sum, v) in self.steer_waiting.iter_mut().zip(values) {
+            *sum += v;
+        }
     }
 
-    /// The representative's estimate of `node` and the node's error shared
+    /// The node's error shared
     /// by every point of the group; `Ok(None)` for a node below every
     /// tangent plane, `Err(())` for one the shared bound does not cover (its
     /// ball too near the group, or members on both sides of some tangent
     /// plane).
-    fn shared_bound(&self, node: &Node) -> Result<Option<(DVec3, DVec3)>, ()> {
+    fn shared_bound(&self, node: &Node) -> Result<Option<DVec3>, ()> {
         let group = &self.group;
         let distance = (node.centroid.as_dvec3() - group.centre).length();
         let radius = f64::from(node.radius);
         let reach = distance + radius + group.radius;
-        match group.side(&node.aabb, reach) {
-            Some(true) => {}
-            Some(false) => return Ok(None),
-            None => return Err(()),
-        }
-        // No point comes nearer the centroid than this.
-        let nearest = distance * (1.0 - DISTANCE_SLACK) - group.radius;
+        let lowest = match group.side(&node.aabb, reach) {
+            Side::Above(lowest) => lowest,
+            Side::Below => return Ok(None),
+            Side::Across => return Err(()),
+        };
+        // No point comes nearer the centroid than this (the centroid lies
+        // in the box, so at least `lowest` above every plane).
+        let nearest = group.nearest(distance, lowest);
         if !(nearest - radius > nearest * 2.0 * Cone::MIN_CLEARANCE) {
             return Err(());
         }
         let inv_nearest = 1.0 / nearest;
         let view = group.view(node, inv_nearest, distance);
-        let scale = node.intensity * self.kd * (inv_nearest * inv_nearest);
-        let error = scale * shared_width(node, &view);
-        let cone = node.cone(self.rep.point).ok_or(())?;
-        let estimate = node_estimate(node, self.kd, self.rep, &cone);
-        Ok(Some((estimate, error)))
+        let intensity = node.intensity * self.kd;
+        let error = intensity * (inv_nearest * inv_nearest) * shared_width(node, &view);
+        Ok(Some(error))
+    }
+
+    /// The darkest sample's estimate of the cut.
+    fn steering(&self) -> DVec3 {
+        let sums = core::array::from_fn(|k| self.steer_settled[k] + self.steer_waiting[k]);
+        darkest(&sums)
+    }
+
+    /// Recomputes the running sums of the samples' values of the waiting
+    /// entries (they subtract and may drift).
+    fn resum_steering(&mut self, scratch: &BatchScratch) {
+        let mut sums: [CompensatedSum; SAMPLES] = Default::default();
+        for (_, slot) in scratch.list.waiting() {
+            for (sum, v) in sums.iter_mut().zip(scratch.steer[slot as usize]) {
+                sum.add(v);
+            }
+        }
+        self.steer_waiting = sums.map(|s| s.value());
     }
 
     /// The error list's loop over the shared bounds until `met` holds for
@@ -303,20 +423,28 @@ impl<S: Shader> SharedCut<'_, S> {
         loop {
             if scratch.list.may_stop() {
                 let largest = scratch.list.largest();
-                let (estimate, error) = scratch.list.sums();
-                if met(self.rep_settled.value() + estimate, error, largest) {
-                    let (estimate, error) = scratch.list.resum();
-                    if met(self.rep_settled.value() + estimate, error, largest) {
+                let (_, error) = scratch.list.sums();
+                if met(self.steering(), error, largest) {
+                    let (_, error) = scratch.list.resum();
+                    self.resum_steering(scratch);
+                    if met(self.steering(), error, largest) {
                         return Ok(());
                     }
                 }
             }
-            let Some(top) = scratch.list.pop() else {
+            let Some((top, slot)) = scratch.list.pop_slot() else {
                 return Ok(());
             };
-            if self.evaluations > self.max_evaluations
-                || scratch.lights.len() + scratch.above.len() + scratch.list.len() > MAX_CUT_ITEMS
+            for (sum, v) in self
+                .steer_waiting
+                .iter_mut()
+                .zip(scratch.steer[slot as usize])
             {
+                *sum -= v;
+            }
+            let entries = scratch.lights.len() + scratch.above.len() + scratch.list.len();
+            let cost = self.evaluations + entries as u64 * self.points / ENTRIES_PER_BOUND;
+            if cost > self.points * BUDGET_PER_POINT || entries > MAX_CUT_ITEMS {
                 return Err(TooCostly);
             }
             let node = &self.tree.nodes[top.node as usize];
@@ -332,14 +460,6 @@ impl<S: Shader> SharedCut<'_, S> {
             }
         }
     }
-}
-
-/// A node's degree-2 series estimate at `surface` with the albedo applied,
-/// as the node bound computes it.
-#[inline]
-fn node_estimate(node: &Node, kd: DVec3, surface: &Surface, cone: &Cone) -> DVec3 {
-    let inv_d = cone.inv_distance;
-    node.intensity * kd * (inv_d * inv_d) * degree_two(surface.normal, cone, node)
 }
 
 /// The certified bound reported for a shared cut's summed `error` whose
@@ -555,7 +675,7 @@ impl<S: Shader> Shading<'_, S> {
         };
         let surfaces = members.iter().map(|&i| *queries[i as usize].surface());
         let group = Group::new(surfaces);
-        let rep = queries[members[0] as usize].surface();
+        let samples = Samples::new(queries, members);
         let mut scratch = core::mem::take(&mut self.scratch.batch);
         let outcome = self.shared_cut(
             queries,
@@ -564,7 +684,7 @@ impl<S: Shader> Shading<'_, S> {
             stats,
             kd,
             group,
-            rep,
+            samples,
             &mut scratch,
         );
         self.scratch.batch = scratch;
@@ -581,23 +701,23 @@ impl<S: Shader> Shading<'_, S> {
         stats: &mut BatchStats,
         kd: DVec3,
         group: Group,
-        rep: &Surface,
+        samples: Samples,
         scratch: &mut BatchScratch,
     ) -> Result<Vec<bool>, TooCostly> {
         scratch.list.clear();
+        scratch.steer.clear();
         scratch.lights.clear();
         scratch.above.clear();
         let mut cut = SharedCut {
             tree: self.tree,
-            shader: &self.shader,
             kd,
             group,
-            rep,
-            rep_per_point: self.shader.prepare(rep),
-            rep_settled: CompensatedSum::default(),
-            settled_error: CompensatedSum::default(),
+            samples,
+            steer_settled: [DVec3::ZERO; SAMPLES],
+            light_error: DVec3::ZERO,
+            steer_waiting: [DVec3::ZERO; SAMPLES],
             evaluations: 0,
-            max_evaluations: (members.len() * EVALUATIONS_PER_POINT) as u64,
+            points: members.len() as u64,
         };
         if !self.tree.nodes.is_empty() {
             cut.enter(scratch, 0);
@@ -614,19 +734,18 @@ impl<S: Shader> Shading<'_, S> {
             cut.evaluations = 0;
             outcome?;
             // The points' sums over the cut.
-            let (rep_estimate, error) = scratch.list.resum();
+            let (_, error) = scratch.list.resum();
             scratch.packed.clear();
-            for e in scratch.list.waiting() {
+            for (e, _) in scratch.list.waiting() {
                 scratch
                     .packed
                     .push_node(&self.tree.nodes[e.node as usize], kd);
             }
             for &(position, intensity) in &scratch.above {
-                scratch
-                    .packed
-                    .push_light(position.as_vec3(), intensity * kd);
+                scratch.packed.push_light(position.as_vec3(), intensity);
             }
-            let bound = packed_bound(error + cut.settled_error.value(), scratch.packed.len());
+            let light_error = cut.light_error * (1.0 + scratch.above.len() as f64 * f64::EPSILON);
+            let bound = packed_bound(error + light_error, scratch.packed.len());
             let largest = scratch.list.largest();
             let nodes = scratch.list.len() as u32;
             let lights = (scratch.lights.len() + scratch.above.len()) as u32;
@@ -648,7 +767,8 @@ impl<S: Shader> Shading<'_, S> {
                     darkest = darkest.min(radiance.max_element());
                 }
             }
-            let reference = (cut.rep_settled.value() + rep_estimate).max_element();
+            cut.resum_steering(scratch);
+            let reference = cut.steering().max_element();
             if darkest == f64::INFINITY || round + 1 == ROUNDS {
                 break;
             }

@@ -143,8 +143,10 @@ impl ErrorList {
         self.unbounded = 0;
     }
 
+    /// Adds an entry; returns its slot, the number of entries pushed
+    /// before it since the last [`clear`](Self::clear).
     #[inline]
-    pub(crate) fn push(&mut self, e: Entry) {
+    pub(crate) fn push(&mut self, e: Entry) -> u32 {
         match e.class {
             Class::Unbounded => self.unbounded += 1,
             Class::OverContribution => self.over_contribution += 1,
@@ -160,6 +162,7 @@ impl ErrorList {
             class: e.class,
         });
         self.entries.push(e);
+        slot
     }
 
     /// The entry that would be refined next.
@@ -170,7 +173,14 @@ impl ErrorList {
 
     #[inline]
     pub(crate) fn pop(&mut self) -> Option<Entry> {
-        let e = self.entries[self.heap.pop()?.slot as usize];
+        self.pop_slot().map(|(e, _)| e)
+    }
+
+    /// [`pop`](Self::pop), with the entry's slot.
+    #[inline]
+    pub(crate) fn pop_slot(&mut self) -> Option<(Entry, u32)> {
+        let slot = self.heap.pop()?.slot;
+        let e = self.entries[slot as usize];
         match e.class {
             Class::Unbounded => self.unbounded -= 1,
             Class::OverContribution => self.over_contribution -= 1,
@@ -179,7 +189,7 @@ impl ErrorList {
         let (estimate, error) = e.counted();
         self.estimate -= estimate;
         self.error -= error;
-        Some(e)
+        Some((e, slot))
     }
 
     /// The largest error waiting (0 when empty).
@@ -225,9 +235,11 @@ impl ErrorList {
         self.heap.len()
     }
 
-    /// The waiting entries, in no particular order.
-    pub(crate) fn waiting(&self) -> impl Iterator<Item = &Entry> + '_ {
-        self.heap.iter().map(|k| &self.entries[k.slot as usize])
+    /// The waiting entries with their slots, in no particular order.
+    pub(crate) fn waiting(&self) -> impl Iterator<Item = (&Entry, u32)> + '_ {
+        self.heap
+            .iter()
+            .map(|k| (&self.entries[k.slot as usize], k.slot))
     }
 
     /// Removes every waiting entry, in no particular order.

@@ -1,6 +1,6 @@
-//! A shared cut's node estimates as structure of arrays, summed at one
-//! point in [`LANES`] independent lanes that the compiler vectorizes; on
-//! `x86_64` the widest vectors the processor has are picked at run time.
+//! A shared cut's estimates as structure of arrays, summed at one point in
+//! [`LANES`] independent lanes that the compiler vectorizes; on `x86_64`
+//! the widest vectors the processor has are picked at run time.
 
 use glam::{DVec3, Vec3};
 
@@ -14,12 +14,17 @@ type Lanes = [f64; LANES];
 /// exact) to halve the bytes each point reads.
 type Lanes32 = [f32; LANES];
 
-/// [`LANES`] entries: each field holds one value per lane.
+/// [`LANES`] single lights: position and intensity times `kd`.
 #[derive(Clone, Copy, Debug, Default)]
-struct Block {
-    centroid: [Lanes32; 3],
-    /// `I_k kd_k` per channel.
+struct LightBlock {
+    position: [Lanes32; 3],
     intensity: [Lanes; 3],
+}
+
+/// [`LANES`] nodes: centroid, intensity times `kd`, and moments.
+#[derive(Clone, Copy, Debug, Default)]
+struct NodeBlock {
+    at: LightBlock,
     /// `o_k` per channel, per axis.
     offsets: [[Lanes32; 3]; 3],
     /// `S_k` per channel, entries `[xx, yy, zz, xy, xz, yz]`.
@@ -28,76 +33,72 @@ struct Block {
 
 /// The entries of a shared cut whose estimate is the degree-2 series
 /// ([`degree_two`](crate::lambert::degree_two)): nodes, and single lights
-/// (zero moments) above every tangent plane.
+/// above every tangent plane (whose series is their exact term `c0`, the
+/// moments being zero).
 #[derive(Debug, Default)]
 pub(crate) struct Packed {
-    blocks: Vec<Block>,
-    len: usize,
+    nodes: Vec<NodeBlock>,
+    node_count: usize,
+    lights: Vec<LightBlock>,
+    light_count: usize,
 }
 
 impl Packed {
     pub(crate) fn clear(&mut self) {
-        self.blocks.clear();
-        self.len = 0;
+        self.nodes.clear();
+        self.lights.clear();
+        self.node_count = 0;
+        self.light_count = 0;
     }
 
     /// Number of entries.
     pub(crate) fn len(&self) -> usize {
-        self.len
+        self.node_count + self.light_count
     }
 
     /// Adds a node, its intensity times `kd`.
     pub(crate) fn push_node(&mut self, node: &Node, kd: DVec3) {
-        let o = node.channel_offsets;
-        let s = node.channel_covariances;
-        let lane = self.lane(node.centroid, node.intensity * kd);
-        let block = self.blocks.last_mut().expect("lane() made a block");
+        let lane = self.node_count % LANES;
+        if lane == 0 {
+            self.nodes.push(NodeBlock {
+                at: LightBlock::padded(node.centroid),
+                ..NodeBlock::default()
+            });
+        }
+        let block = self.nodes.last_mut().expect("a block was just pushed");
+        block.at.set(lane, node.centroid, node.intensity * kd);
         for k in 0..3 {
-            for axis in 0..3 {
-                block.offsets[k][axis][lane] = o[k][axis];
+            for (axis, value) in node.channel_offsets[k].to_array().into_iter().enumerate() {
+                block.offsets[k][axis][lane] = value;
             }
-            for (entry, value) in s[k].iter().enumerate() {
+            for (entry, value) in node.channel_covariances[k].iter().enumerate() {
                 block.covariances[k][entry][lane] = *value;
             }
         }
+        self.node_count += 1;
     }
 
-    /// Adds a single light of `intensity` times `kd` at `position`.
+    /// Adds a single light of `intensity` (times `kd`) at `position`.
     pub(crate) fn push_light(&mut self, position: Vec3, intensity: DVec3) {
-        self.lane(position, intensity);
-    }
-
-    /// Claims the next lane for an entry at `centroid` of `intensity`
-    /// (moments zero until set) and returns its index in the last block.
-    fn lane(&mut self, centroid: Vec3, intensity: DVec3) -> usize {
-        let lane = self.len % LANES;
+        let lane = self.light_count % LANES;
         if lane == 0 {
-            // Unused lanes keep this entry's centroid with zero intensity:
-            // finite, and they add exactly 0.
-            let mut block = Block::default();
-            for axis in 0..3 {
-                block.centroid[axis] = [centroid[axis]; LANES];
-            }
-            self.blocks.push(block);
+            self.lights.push(LightBlock::padded(position));
         }
-        let block = self.blocks.last_mut().expect("a block was just pushed");
-        for axis in 0..3 {
-            block.centroid[axis][lane] = centroid[axis];
-            block.intensity[axis][lane] = intensity[axis];
-        }
-        self.len += 1;
-        lane
+        let block = self.lights.last_mut().expect("a block was just pushed");
+        block.set(lane, position, intensity);
+        self.light_count += 1;
     }
 
     /// The sum of every entry's degree-2 estimate at `point` with unit
     /// normal `normal`: the operations of
     /// [`degree_two`](crate::lambert::degree_two) and of the node bound's
-    /// scale `I kd / D^2`, lane by lane. Each lane adds its entries in
-    /// order (`len / LANES` roundings per channel), and the lanes are added
-    /// last.
+    /// scale `I kd / D^2`, lane by lane (for a light, whose moments are
+    /// zero, the terms that vanish exactly are skipped: the same bits).
+    /// Each lane adds its entries in order (at most `len / LANES + 1`
+    /// roundings per channel), and the lanes are added last.
     ///
-    /// Every entry's centroid must lie farther from `point` than its
-    /// radius (the shared cut guarantees it), so `D > 0`.
+    /// Every entry must lie farther from `point` than its radius (the shared
+    /// cut guarantees it), so `D > 0`.
     // The crate's only unsafe code: calling the copies compiled for wider
     // vectors once the processor is known to have them.
     #[allow(unsafe_code)]
@@ -136,51 +137,98 @@ impl Packed {
     fn sum_lanes(&self, point: DVec3, normal: DVec3) -> DVec3 {
         let mut acc = [[0.0f64; LANES]; 3];
         let (p, n) = (point.to_array(), normal.to_array());
-        for b in &self.blocks {
+        for b in &self.lights {
             for l in 0..LANES {
-                let u = [
-                    f64::from(b.centroid[0][l]) - p[0],
-                    f64::from(b.centroid[1][l]) - p[1],
-                    f64::from(b.centroid[2][l]) - p[2],
-                ];
-                let distance = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
-                let inv_d = 1.0 / distance;
-                let uh = [u[0] * inv_d, u[1] * inv_d, u[2] * inv_d];
-                let c0 = n[0] * uh[0] + n[1] * uh[1] + n[2] * uh[2];
-                let three_c0 = 3.0 * c0;
+                let g = b.geometry(l, p, n);
+                for (k, sum) in acc.iter_mut().enumerate() {
+                    sum[l] += b.intensity[k][l] * g.inv_d2 * g.c0;
+                }
+            }
+        }
+        for b in &self.nodes {
+            for l in 0..LANES {
+                let g = b.at.geometry(l, p, n);
+                let uh = g.uh;
+                let three_c0 = 3.0 * g.c0;
                 let grad = [
                     n[0] - three_c0 * uh[0],
                     n[1] - three_c0 * uh[1],
                     n[2] - three_c0 * uh[2],
                 ];
-                let (a, bb) = (15.0 * c0, 3.0 * c0);
+                let (a, c) = (15.0 * g.c0, 3.0 * g.c0);
                 let weights = [
-                    a * uh[0] * uh[0] - bb - 6.0 * uh[0] * n[0],
-                    a * uh[1] * uh[1] - bb - 6.0 * uh[1] * n[1],
-                    a * uh[2] * uh[2] - bb - 6.0 * uh[2] * n[2],
+                    a * uh[0] * uh[0] - c - 6.0 * uh[0] * n[0],
+                    a * uh[1] * uh[1] - c - 6.0 * uh[1] * n[1],
+                    a * uh[2] * uh[2] - c - 6.0 * uh[2] * n[2],
                     2.0 * a * uh[0] * uh[1] - 6.0 * (uh[0] * n[1] + uh[1] * n[0]),
                     2.0 * a * uh[0] * uh[2] - 6.0 * (uh[0] * n[2] + uh[2] * n[0]),
                     2.0 * a * uh[1] * uh[2] - 6.0 * (uh[1] * n[2] + uh[2] * n[1]),
                 ];
-                let half_inv_d2 = 0.5 * (inv_d * inv_d);
-                let inv_d2 = inv_d * inv_d;
-                for k in 0..3 {
+                let half_inv_d2 = 0.5 * (g.inv_d * g.inv_d);
+                for (k, sum) in acc.iter_mut().enumerate() {
                     let o = &b.offsets[k];
                     let first = (grad[0] * f64::from(o[0][l])
                         + grad[1] * f64::from(o[1][l])
                         + grad[2] * f64::from(o[2][l]))
-                        * inv_d;
+                        * g.inv_d;
                     let s = &b.covariances[k];
                     let mut form = 0.0;
-                    for e in 0..6 {
-                        form += f64::from(s[e][l]) * weights[e];
+                    for (entry, weight) in s.iter().zip(weights) {
+                        form += f64::from(entry[l]) * weight;
                     }
-                    let series = c0 + first + form * half_inv_d2;
-                    acc[k][l] += b.intensity[k][l] * inv_d2 * series;
+                    let series = g.c0 + first + form * half_inv_d2;
+                    sum[l] += b.at.intensity[k][l] * g.inv_d2 * series;
                 }
             }
         }
         let total = |k: usize| acc[k].iter().sum::<f64>();
         DVec3::new(total(0), total(1), total(2))
+    }
+}
+
+/// What an entry's lane shares between its terms: `1/D`, `1/D^2`, the unit
+/// axis and `c0 = n . uh`, computed as [`Cone::new`](crate::Cone::new)
+/// does.
+struct Geometry {
+    inv_d: f64,
+    inv_d2: f64,
+    uh: [f64; 3],
+    c0: f64,
+}
+
+impl LightBlock {
+    /// A block whose lanes all sit at `position` with zero intensity:
+    /// finite, so unused lanes add exactly 0.
+    fn padded(position: Vec3) -> Self {
+        let mut block = Self::default();
+        for axis in 0..3 {
+            block.position[axis] = [position[axis]; LANES];
+        }
+        block
+    }
+
+    fn set(&mut self, lane: usize, position: Vec3, intensity: DVec3) {
+        for axis in 0..3 {
+            self.position[axis][lane] = position[axis];
+            self.intensity[axis][lane] = intensity[axis];
+        }
+    }
+
+    #[inline(always)]
+    fn geometry(&self, l: usize, p: [f64; 3], n: [f64; 3]) -> Geometry {
+        let u = [
+            f64::from(self.position[0][l]) - p[0],
+            f64::from(self.position[1][l]) - p[1],
+            f64::from(self.position[2][l]) - p[2],
+        ];
+        let distance = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+        let inv_d = 1.0 / distance;
+        let uh = [u[0] * inv_d, u[1] * inv_d, u[2] * inv_d];
+        Geometry {
+            inv_d,
+            inv_d2: inv_d * inv_d,
+            uh,
+            c0: n[0] * uh[0] + n[1] * uh[1] + n[2] * uh[2],
+        }
     }
 }

@@ -142,7 +142,9 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             list.pop();
             if refining {
                 let visible = top.seen == Seen::Visible;
-                self.refine(&node, visible, 1.0, |e| list.push(e));
+                self.refine(&node, visible, 1.0, |e| {
+                    list.push(e);
+                });
             } else if let Some(e) = self.classify(&node, top) {
                 list.push(e);
             }
