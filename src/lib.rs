@@ -165,7 +165,7 @@ pub use shading::{
     Accepts, BatchStats, NoView, Query, ShadeResult, Shading, Stop, Target, Threshold, WithView,
 };
 pub use tree::{LightTree, Node, TreeBuilder};
-pub use visibility::{Coverage, NodeRegion, Unoccluded, Visibility};
+pub use visibility::{Coverage, NodeRegion, PointGroup, Unoccluded, Visibility};
 
 // The README's code blocks are compiled and run as doc tests.
 #[cfg(doctest)]

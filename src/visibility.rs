@@ -35,6 +35,18 @@ pub struct NodeRegion {
     pub light_count: u32,
 }
 
+/// A group of shading points, as batch shading
+/// ([`Shading::shade_batch`](crate::Shading::shade_batch)) describes it to the
+/// host when it asks about a node for all of them at once.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct PointGroup {
+    /// Tight box of the points.
+    pub aabb: Aabb,
+    /// Number of points.
+    pub count: u32,
+}
+
 /// Occlusion answers supplied by the host renderer (its ray tracer).
 ///
 /// # Contract
@@ -46,6 +58,10 @@ pub struct NodeRegion {
 ///   unsure it returns [`Coverage::Partial`], which is always correct.
 /// * [`visible`](Self::visible) is the exact point-to-point visibility `V_i`
 ///   that the model (and `shade_exact`) uses.
+/// * [`classify_group`](Self::classify_group), for hosts that set
+///   [`CLASSIFIES_GROUPS`](Self::CLASSIFIES_GROUPS), answers like `classify`
+///   for every segment from any point of the group's box to any point of
+///   the node's box.
 /// * [`visible_fraction`](Self::visible_fraction) may be any estimate in
 ///   `[0, 1]`, e.g. volumetric visibility after Sillion 1995: it changes the
 ///   estimate of a partially occluded node, never its certified interval
@@ -81,6 +97,11 @@ pub struct NodeRegion {
 ///   nodes it takes, and stops asking in a call where small nodes keep
 ///   answering `Partial` (foliage, lattices); then every light it needs is
 ///   asked point-to-point, about one shadow ray per light.
+/// * [`classify_group`](Self::classify_group) is the same shaft test with
+///   the group's box in place of the point: the shaft between two boxes.
+///   Batch shading shares a cut between the points of a group where the
+///   answers hold for the whole group and asks point-to-point for the
+///   lights that stay partial.
 /// * [`visible_fraction`](Self::visible_fraction) is worth its rays only
 ///   when partial nodes stay in the cut, that is when a budget stops it:
 ///   the cut refines a partial node right after asking about it.
@@ -94,6 +115,21 @@ pub trait Visibility {
 
     /// Whether the segment from `point` to a light at `light` is unoccluded.
     fn visible(&mut self, point: Vec3, light: Vec3) -> bool;
+
+    /// `true` for a host that answers [`classify_group`](Self::classify_group):
+    /// batch shading then shares cuts between neighbouring points; for
+    /// other hosts (the default) it shades each point on its own.
+    const CLASSIFIES_GROUPS: bool = false;
+
+    /// Classifies `node`'s box as seen from every point of `group`:
+    /// [`Coverage::Visible`] only if no occluder meets any segment from a
+    /// point of `group.aabb` to a point of `node.aabb`,
+    /// [`Coverage::Occluded`] only if every such segment is blocked. The
+    /// default answers [`Coverage::Partial`], which is always correct.
+    fn classify_group(&mut self, group: &PointGroup, node: &NodeRegion) -> Coverage {
+        let _ = (group, node);
+        Coverage::Partial
+    }
 
     /// Optional estimate of the visible fraction of a partially occluded
     /// node, in `[0, 1]`. The default, `None`, makes the cut use the middle of
@@ -110,6 +146,12 @@ pub struct Unoccluded;
 
 impl Visibility for Unoccluded {
     const ALWAYS_VISIBLE: bool = true;
+    const CLASSIFIES_GROUPS: bool = true;
+
+    #[inline(always)]
+    fn classify_group(&mut self, _group: &PointGroup, _node: &NodeRegion) -> Coverage {
+        Coverage::Visible
+    }
 
     #[inline(always)]
     fn classify(&mut self, _point: Vec3, _node: &NodeRegion) -> Coverage {
@@ -124,6 +166,12 @@ impl Visibility for Unoccluded {
 
 impl<V: Visibility> Visibility for &mut V {
     const ALWAYS_VISIBLE: bool = V::ALWAYS_VISIBLE;
+    const CLASSIFIES_GROUPS: bool = V::CLASSIFIES_GROUPS;
+
+    #[inline]
+    fn classify_group(&mut self, group: &PointGroup, node: &NodeRegion) -> Coverage {
+        (**self).classify_group(group, node)
+    }
 
     #[inline]
     fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {

@@ -7,7 +7,7 @@ mod common;
 use common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::Vec3;
 use manylights::{
-    Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeError,
+    Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query, ShadeError,
     ShadeResult, Threshold, Unoccluded, Visibility,
 };
 use proptest::prelude::*;
@@ -160,6 +160,13 @@ proptest! {
             check_bound(r, shading.exact_query(q, &mut host))?;
             check_threshold(r, &t)?;
         }
+        // A host that cannot classify groups: every point on its own.
+        let mut alone = PerPoint(Wall { x: wall });
+        let stats = shading.shade_batch(&qs, t, &mut alone, &mut results).unwrap();
+        prop_assert_eq!(stats.points_alone as usize, qs.len());
+        for (q, r) in qs.iter().zip(&results) {
+            check_bound(r, shading.exact_query(q, &mut alone))?;
+        }
     }
 }
 
@@ -176,6 +183,16 @@ impl Wall {
 }
 
 impl Visibility for Wall {
+    const CLASSIFIES_GROUPS: bool = true;
+
+    fn classify_group(&mut self, group: &PointGroup, node: &NodeRegion) -> Coverage {
+        let here = self.side(group.aabb.min);
+        if self.side(group.aabb.max) != here {
+            return Coverage::Partial;
+        }
+        self.classify(group.aabb.min, node)
+    }
+
     fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
         let (lo, hi) = (self.side(node.aabb.min), self.side(node.aabb.max));
         let here = self.side(point);
@@ -190,6 +207,19 @@ impl Visibility for Wall {
 
     fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
         self.side(point) == self.side(light)
+    }
+}
+
+/// The wall answering point by point only.
+struct PerPoint(Wall);
+
+impl Visibility for PerPoint {
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
+        self.0.classify(point, node)
+    }
+
+    fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
+        self.0.visible(point, light)
     }
 }
 
@@ -286,4 +316,59 @@ fn a_results_slice_of_the_wrong_length_is_an_error() {
         )
         .unwrap();
     assert_eq!(stats.shared_points + stats.points_alone, 0);
+}
+
+#[cfg(feature = "rayon")]
+#[test]
+fn the_parallel_batch_gives_the_same_bits() {
+    let (tree, mut queries) = street_patch();
+    // Scattered points too, so that some groups split and some points are
+    // shaded alone.
+    queries.extend((0..64).map(|k| {
+        let x = (k * 977 % 30_000) as f32;
+        Query::new(Vec3::new(x, (k % 7) as f32 - 3.0, 0.5), Vec3::new(0.1, 0.0, 1.0)).unwrap()
+    }));
+    let mut shading = tree.shading(Lambert::new(Vec3::new(0.8, 0.6, 0.4)));
+    for t in [
+        Threshold::relative(0.01),
+        Threshold::absolute(1e-3),
+        Threshold::relative(0.05).with_budget(200),
+    ] {
+        let mut serial = vec![placeholder(); queries.len()];
+        let mut parallel = vec![placeholder(); queries.len()];
+        let a = shading
+            .shade_batch(&queries, t, Unoccluded, &mut serial)
+            .unwrap();
+        let b = shading
+            .shade_batch_parallel(&queries, t, Unoccluded, &mut parallel)
+            .unwrap();
+        assert_eq!(a, b);
+        assert_eq!(serial, parallel);
+    }
+}
+
+#[test]
+fn a_wall_across_the_street_is_asked_once_per_group() {
+    let (tree, queries) = street_patch();
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(0.8)));
+    let t = Threshold::relative(0.01);
+    // The wall hides the half of the street beyond x = 1010 from the patch.
+    let mut host = Wall { x: 1010.0 };
+    let mut results = vec![placeholder(); queries.len()];
+    let stats = shading
+        .shade_batch(&queries, t, &mut host, &mut results)
+        .unwrap();
+    assert!(stats.shared_points as usize >= queries.len() * 9 / 10, "{stats:?}");
+    assert!(stats.shared_classifications > 0, "{stats:?}");
+    let mut unshadowed = vec![placeholder(); queries.len()];
+    shading
+        .shade_batch(&queries, t, Unoccluded, &mut unshadowed)
+        .unwrap();
+    for ((q, r), free) in queries.iter().zip(&results).zip(&unshadowed) {
+        let exact = shading.exact_query(q, &mut host);
+        assert!(r.certifies(exact), "{r:?} against {exact}");
+        assert!(r.error_bound.max_element() <= 0.01 * r.radiance.max_element());
+        // The wall takes away the lamps beyond it.
+        assert!(r.radiance.max_element() < free.radiance.max_element());
+    }
 }

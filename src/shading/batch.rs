@@ -4,11 +4,11 @@
 
 use core::ops::Range;
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::packed::Packed;
-use super::refine::reported_bound;
+use super::refine::{region, reported_bound};
 use super::{Accepts, Query, ShadeResult, Shading, Stop, Threshold};
 use crate::ShadeError;
 use crate::geometry::{Aabb, Cone, Surface};
@@ -18,7 +18,7 @@ use crate::numeric::{
 };
 use crate::shader::Shader;
 use crate::tree::{LightTree, Node, morton};
-use crate::visibility::Visibility;
+use crate::visibility::{Coverage, NodeRegion, PointGroup, Visibility};
 
 /// What a batch call did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -35,6 +35,9 @@ pub struct BatchStats {
     /// Node bounds computed for the shared cuts (each point's own work is in
     /// its [`ShadeResult`]).
     pub shared_evaluations: u64,
+    /// Classifications asked of the host for whole groups
+    /// ([`Visibility::classify_group`]).
+    pub shared_classifications: u64,
 }
 
 impl core::ops::AddAssign for BatchStats {
@@ -43,6 +46,7 @@ impl core::ops::AddAssign for BatchStats {
         self.shared_points += other.shared_points;
         self.points_alone += other.points_alone;
         self.shared_evaluations += other.shared_evaluations;
+        self.shared_classifications += other.shared_classifications;
     }
 }
 
@@ -85,6 +89,8 @@ struct Group {
     drop: f64,
     /// Largest `|n_p - n0|` over the points' exact unit normals.
     tilt: f64,
+    /// The points as the host sees them.
+    region: PointGroup,
 }
 
 impl Group {
@@ -102,7 +108,11 @@ impl Group {
         let centre = sum_p / count;
         let normal = sum_n.try_normalize().unwrap_or(first_normal);
         let (mut radius, mut rise, mut drop, mut tilt) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        let mut count = 0;
         for s in surfaces {
+            let at = s.point.as_vec3();
+            (lo, hi, count) = (lo.min(at), hi.max(at), count + 1);
             let offset = s.point - centre;
             radius = radius.max(offset.length());
             let height = normal.dot(offset);
@@ -121,6 +131,10 @@ impl Group {
             rise: rise * (1.0 + DISTANCE_SLACK) + pad,
             drop: drop * (1.0 + DISTANCE_SLACK) + pad,
             tilt: tilt * (1.0 + DISTANCE_SLACK) + 16.0 * f64::EPSILON,
+            region: PointGroup {
+                aabb: Aabb { min: lo, max: hi },
+                count,
+            },
         }
     }
 
@@ -254,6 +268,9 @@ pub(crate) struct BatchScratch {
     /// Single lights of the cut on both sides of some tangent plane,
     /// evaluated exactly at each point: position and intensity.
     lights: Vec<(DVec3, DVec3)>,
+    /// Single lights of the cut that the host saw partially from the
+    /// group: asked point-to-point and evaluated exactly at each point.
+    shadowed: Vec<(DVec3, DVec3)>,
     /// Single lights of the cut above every tangent plane: position and
     /// intensity times `kd`.
     above: Vec<(DVec3, DVec3)>,
@@ -267,8 +284,10 @@ pub(crate) struct BatchScratch {
 }
 
 /// One group's cut in the making.
-struct SharedCut<'a> {
+struct SharedCut<'a, V> {
     tree: &'a LightTree,
+    visibility: &'a mut V,
+    classifications: u64,
     kd: DVec3,
     group: Group,
     /// The points whose estimates steer a relative target.
@@ -288,10 +307,33 @@ struct SharedCut<'a> {
 /// The cut grew past its allowance: the group is split.
 struct TooCostly;
 
-impl SharedCut<'_> {
+impl<V: Visibility> SharedCut<'_, V> {
+    /// Asks the host about `region` for the whole group, unless `visible`
+    /// is known already; `None` when it is occluded, else whether it is
+    /// visible.
+    fn ask(&mut self, visible: bool, region: &NodeRegion) -> Option<bool> {
+        if visible || V::ALWAYS_VISIBLE {
+            return Some(true);
+        }
+        self.classifications += 1;
+        match self.visibility.classify_group(&self.group.region, region) {
+            Coverage::Occluded => None,
+            Coverage::Visible => Some(true),
+            Coverage::Partial => Some(false),
+        }
+    }
+
     /// Puts a single light into the cut unless it is below every point's
-    /// tangent plane.
-    fn light(&mut self, scratch: &mut BatchScratch, position: DVec3, intensity: DVec3) {
+    /// tangent plane or hidden from the whole group (`visible` when its
+    /// node is known visible; `leaf` is its node, for the host).
+    fn light(
+        &mut self,
+        scratch: &mut BatchScratch,
+        position: DVec3,
+        intensity: DVec3,
+        visible: bool,
+        leaf: usize,
+    ) {
         if intensity == DVec3::ZERO {
             return;
         }
@@ -299,10 +341,29 @@ impl SharedCut<'_> {
         let distance = offset.length();
         let height = self.group.normal.dot(offset);
         let scaled = intensity * self.kd;
-        match self
+        let side = self
             .group
-            .side_of(height, height, distance + self.group.radius)
-        {
+            .side_of(height, height, distance + self.group.radius);
+        if side == Side::Below {
+            return;
+        }
+        let at = position.as_vec3();
+        let here = NodeRegion {
+            index: leaf as u32,
+            aabb: Aabb { min: at, max: at },
+            centroid: at,
+            radius: 0.0,
+            light_count: 1,
+        };
+        match self.ask(visible, &here) {
+            None => return,
+            Some(true) => {}
+            Some(false) => {
+                scratch.shadowed.push((position, intensity));
+                return;
+            }
+        }
+        match side {
             Side::Below => return,
             // The series of a single light is its exact term; what is left
             // is the rounding of its cosine and of the offset (see
@@ -325,18 +386,31 @@ impl SharedCut<'_> {
     /// a single light when its radius is 0, else an entry of the error list
     /// (to be refined whatever its error when the shared bound does not
     /// apply).
-    fn enter(&mut self, scratch: &mut BatchScratch, index: usize) {
+    fn enter(&mut self, scratch: &mut BatchScratch, index: usize, visible: bool) {
         let node = &self.tree.nodes[index];
         if node.intensity == DVec3::ZERO {
             return;
         }
         if node.radius == 0.0 {
-            self.light(scratch, node.centroid.as_dvec3(), node.intensity);
+            let (at, intensity) = (node.centroid.as_dvec3(), node.intensity);
+            self.light(scratch, at, intensity, visible, index);
             return;
         }
         self.evaluations += 1;
-        let (entry, values) = match self.shared_bound(node) {
-            Ok(Some(error)) => (
+        let bound = self.shared_bound(node);
+        if bound == Ok(None) {
+            return;
+        }
+        let Some(visible) = self.ask(visible, &region(node, index)) else {
+            return;
+        };
+        let seen = if visible {
+            Seen::Visible
+        } else {
+            Seen::Partial(None)
+        };
+        let (entry, values) = match bound {
+            Ok(Some(error)) if visible => (
                 Entry::new(
                     Class::Error,
                     index as u32,
@@ -347,12 +421,12 @@ impl SharedCut<'_> {
                 self.samples
                     .values(node.centroid.as_dvec3(), node.intensity * self.kd),
             ),
-            Ok(None) => return,
-            Err(()) => (
+            // Too near, across some plane, or partly hidden: refined.
+            _ => (
                 Entry::new(
                     Class::Unbounded,
                     index as u32,
-                    Seen::Visible,
+                    seen,
                     DVec3::ZERO,
                     DVec3::ZERO,
                 ),
@@ -443,19 +517,24 @@ impl SharedCut<'_> {
                 *sum -= v;
             }
             let entries = scratch.lights.len() + scratch.above.len() + scratch.list.len();
-            let cost = self.evaluations + entries as u64 * self.points / ENTRIES_PER_BOUND;
+            // A light asked point-to-point costs each point a ray, about a
+            // node bound.
+            let rays = scratch.shadowed.len() as u64 * self.points;
+            let cost = self.evaluations + rays + entries as u64 * self.points / ENTRIES_PER_BOUND;
             if cost > self.points * BUDGET_PER_POINT || entries > MAX_CUT_ITEMS {
                 return Err(TooCostly);
             }
             let node = &self.tree.nodes[top.node as usize];
+            let visible = top.seen == Seen::Visible;
             if node.is_leaf() {
                 for k in node.lights() {
                     let l = self.tree.lights[k];
-                    self.light(scratch, l.position.as_dvec3(), l.intensity.as_dvec3());
+                    let (at, intensity) = (l.position.as_dvec3(), l.intensity.as_dvec3());
+                    self.light(scratch, at, intensity, visible, top.node as usize);
                 }
             } else {
                 for child in node.children() {
-                    self.enter(scratch, child);
+                    self.enter(scratch, child, visible);
                 }
             }
         }
@@ -554,11 +633,25 @@ impl<S: Shader> Shading<'_, S> {
     /// lights; the shared bounds are counted once, in the returned
     /// [`BatchStats`].
     ///
+    /// With occluders, a host that classifies nodes for whole groups
+    /// ([`Visibility::classify_group`]) is asked once per group about each
+    /// node the cut takes: hidden nodes drop out, visible ones are shared
+    /// as without occluders, partly hidden ones are refined, and a single
+    /// light still partly hidden is asked point-to-point by each point
+    /// (counted in its [`point_queries`](ShadeResult::point_queries)).
+    ///
     /// Cuts are shared for shaders that are purely diffuse
     /// ([`Shader::diffuse_albedo`]), with [`Unoccluded`](crate::Unoccluded)
-    /// visibility and a threshold without a budget, maximal contribution or
-    /// interpolation. Otherwise every point is shaded on its own, with the
-    /// same results as calling [`shade_query`](Self::shade_query) for each.
+    /// or a host that classifies groups, and a threshold without a budget,
+    /// maximal contribution or interpolation. Otherwise every point is
+    /// shaded on its own, with the same results as calling
+    /// [`shade_query`](Self::shade_query) for each.
+    ///
+    /// Speed: on a 10^6-light street city seen from above the streets, one
+    /// core, certified 1% per pixel, the batch call is some hundreds of
+    /// times faster than a vectorized exact sum and several times faster
+    /// than shading each pixel on its own (`cargo run --release -p
+    /// manylights-report -- batch` measures it).
     ///
     /// # Errors
     /// [`ShadeError::BatchLength`] when `results` is not as long as
@@ -602,9 +695,87 @@ impl<S: Shader> Shading<'_, S> {
         Ok(stats)
     }
 
+    /// [`shade_batch`](Self::shade_batch) spread over rayon's thread pool:
+    /// the same groups are formed and each is shaded on some thread with
+    /// a session of its own (the shader cloned, the visibility host cloned
+    /// per group), so the results are the same bits as `shade_batch`'s.
+    /// Without shared cuts, chunks of the batch are shaded point by point on
+    /// the threads.
+    ///
+    /// # Errors
+    /// As [`shade_batch`](Self::shade_batch).
+    #[cfg(feature = "rayon")]
+    pub fn shade_batch_parallel<M, V>(
+        &self,
+        queries: &[Query<M>],
+        threshold: Threshold,
+        visibility: V,
+        results: &mut [ShadeResult],
+    ) -> Result<BatchStats, ShadeError>
+    where
+        M: Sync,
+        S: Accepts<M> + Clone + Send + Sync,
+        V: Visibility + Clone + Send + Sync,
+    {
+        use rayon::prelude::*;
+
+        if queries.len() != results.len() {
+            return Err(ShadeError::BatchLength {
+                queries: queries.len(),
+                results: results.len(),
+            });
+        }
+        threshold.check()?;
+        let session = || self.tree.shading(self.shader.clone());
+        if !self.shares::<V>(&threshold) {
+            const CHUNK: usize = 64;
+            results
+                .par_chunks_mut(CHUNK)
+                .zip(queries.par_chunks(CHUNK))
+                .try_for_each_init(session, |shading, (out, chunk)| {
+                    let mut visibility = visibility.clone();
+                    for (r, q) in out.iter_mut().zip(chunk) {
+                        *r = shading.shade_query(q, threshold, &mut visibility)?;
+                    }
+                    Ok::<_, ShadeError>(())
+                })?;
+            return Ok(BatchStats {
+                points_alone: queries.len() as u32,
+                ..BatchStats::default()
+            });
+        }
+        let order = morton_order(queries);
+        let runs = group_runs(queries, &order);
+        let shaded: Vec<(Vec<(u32, ShadeResult)>, BatchStats)> = runs
+            .into_par_iter()
+            .map_init(session, |shading, run| {
+                let mut out = Vec::with_capacity(run.len());
+                let mut stats = BatchStats::default();
+                let mut visibility = visibility.clone();
+                shading.shade_members(
+                    queries,
+                    &order[run],
+                    threshold,
+                    &mut visibility,
+                    &mut |i, r| out.push((i as u32, r)),
+                    &mut stats,
+                )?;
+                Ok((out, stats))
+            })
+            .collect::<Result<_, ShadeError>>()?;
+        let mut stats = BatchStats::default();
+        for (out, s) in shaded {
+            stats += s;
+            for (i, r) in out {
+                results[i as usize] = r;
+            }
+        }
+        Ok(stats)
+    }
+
     /// Whether a batch call with this threshold and visibility shares cuts.
     fn shares<V: Visibility>(&self, threshold: &Threshold) -> bool {
-        V::ALWAYS_VISIBLE
+        (V::ALWAYS_VISIBLE || V::CLASSIFIES_GROUPS)
             && self.shader.diffuse_albedo().is_some()
             && threshold.budget().is_none()
             && threshold.max_contribution().is_none()
@@ -637,7 +808,7 @@ impl<S: Shader> Shading<'_, S> {
             stats.points_alone += members.len() as u32;
             return Ok(());
         }
-        match self.shade_shared(queries, members, &threshold, stats) {
+        match self.shade_shared(queries, members, &threshold, visibility, stats) {
             Ok(alone) => {
                 for (k, &i) in members.iter().enumerate() {
                     let i = i as usize;
@@ -663,11 +834,12 @@ impl<S: Shader> Shading<'_, S> {
     /// Picks a shared cut for `members` and shades them through it; fills
     /// the scratch results and returns which members still need shading on
     /// their own.
-    fn shade_shared<M>(
+    fn shade_shared<M, V: Visibility>(
         &mut self,
         queries: &[Query<M>],
         members: &[u32],
         threshold: &Threshold,
+        visibility: &mut V,
         stats: &mut BatchStats,
     ) -> Result<Vec<bool>, TooCostly> {
         let Some(kd) = self.shader.diffuse_albedo() else {
@@ -681,10 +853,9 @@ impl<S: Shader> Shading<'_, S> {
             queries,
             members,
             threshold,
+            visibility,
             stats,
-            kd,
-            group,
-            samples,
+            (kd, group, samples),
             &mut scratch,
         );
         self.scratch.batch = scratch;
@@ -692,24 +863,25 @@ impl<S: Shader> Shading<'_, S> {
     }
 
     /// [`shade_shared`](Self::shade_shared) with its scratch taken out.
-    #[allow(clippy::too_many_arguments)]
-    fn shared_cut<M>(
+    fn shared_cut<M, V: Visibility>(
         &self,
         queries: &[Query<M>],
         members: &[u32],
         threshold: &Threshold,
+        visibility: &mut V,
         stats: &mut BatchStats,
-        kd: DVec3,
-        group: Group,
-        samples: Samples,
+        (kd, group, samples): (DVec3, Group, Samples),
         scratch: &mut BatchScratch,
     ) -> Result<Vec<bool>, TooCostly> {
         scratch.list.clear();
         scratch.steer.clear();
         scratch.lights.clear();
+        scratch.shadowed.clear();
         scratch.above.clear();
         let mut cut = SharedCut {
             tree: self.tree,
+            visibility,
+            classifications: 0,
             kd,
             group,
             samples,
@@ -720,7 +892,7 @@ impl<S: Shader> Shading<'_, S> {
             points: members.len() as u64,
         };
         if !self.tree.nodes.is_empty() {
-            cut.enter(scratch, 0);
+            cut.enter(scratch, 0, false);
         }
         let mut margin = FIRST_MARGIN;
         let mut alone = vec![false; members.len()];
@@ -731,7 +903,8 @@ impl<S: Shader> Shading<'_, S> {
                 threshold.met(estimate * margin, reported_bound(error), largest)
             });
             stats.shared_evaluations += cut.evaluations;
-            cut.evaluations = 0;
+            stats.shared_classifications += cut.classifications;
+            (cut.evaluations, cut.classifications) = (0, 0);
             outcome?;
             // The points' sums over the cut.
             let (_, error) = scratch.list.resum();
@@ -748,18 +921,17 @@ impl<S: Shader> Shading<'_, S> {
             let bound = packed_bound(error + light_error, scratch.packed.len());
             let largest = scratch.list.largest();
             let nodes = scratch.list.len() as u32;
-            let lights = (scratch.lights.len() + scratch.above.len()) as u32;
+            let lights = (scratch.lights.len() + scratch.above.len() + scratch.shadowed.len()) as u32;
             let mut darkest = f64::INFINITY;
             for (k, &i) in members.iter().enumerate() {
-                let surface = queries[i as usize].surface();
-                let radiance = self.point_sum(surface, scratch);
+                let (radiance, rays) = self.point_sum(&queries[i as usize], scratch, cut.visibility);
                 scratch.results[k] = ShadeResult {
                     radiance,
                     error_bound: bound,
                     nodes_evaluated: nodes,
                     lights_evaluated: lights,
                     classify_queries: 0,
-                    point_queries: 0,
+                    point_queries: rays,
                     stop: Stop::ThresholdMet,
                 };
                 alone[k] = !threshold.met(radiance, bound, largest);
@@ -788,16 +960,33 @@ impl<S: Shader> Shading<'_, S> {
     }
 
     /// One point's sum over the shared cut in `scratch`, clamped at 0 (the
-    /// exact value is non-negative).
-    fn point_sum(&self, surface: &Surface, scratch: &BatchScratch) -> DVec3 {
+    /// exact value is non-negative), and the point-to-point queries it
+    /// asked.
+    fn point_sum<M, V: Visibility>(
+        &self,
+        query: &Query<M>,
+        scratch: &BatchScratch,
+        visibility: &mut V,
+    ) -> (DVec3, u32) {
+        let surface = query.surface();
         let mut sum = CompensatedSum::default();
-        if !scratch.lights.is_empty() {
+        let mut rays = 0;
+        if !scratch.lights.is_empty() || !scratch.shadowed.is_empty() {
             let per_point = self.shader.prepare(surface);
             for &(position, intensity) in &scratch.lights {
                 sum.add(self.shader.eval(&per_point, surface, position, intensity));
             }
+            for &(position, intensity) in &scratch.shadowed {
+                let value = self.shader.eval(&per_point, surface, position, intensity);
+                if value != DVec3::ZERO {
+                    rays += 1;
+                    if visibility.visible(query.point(), position.as_vec3()) {
+                        sum.add(value);
+                    }
+                }
+            }
         }
         sum.add(scratch.packed.sum(surface.point, surface.normal));
-        sum.value().max(DVec3::ZERO)
+        (sum.value().max(DVec3::ZERO), rays)
     }
 }

@@ -354,7 +354,7 @@ pub(crate) fn reported_bound(error: DVec3) -> DVec3 {
 }
 
 /// What the host is told about node `index`.
-fn region(node: &Node, index: usize) -> NodeRegion {
+pub(crate) fn region(node: &Node, index: usize) -> NodeRegion {
     NodeRegion {
         index: index as u32,
         aabb: node.aabb,
