@@ -10,6 +10,8 @@
 //! for each shading point, a cut through the tree with the paper's *error
 //! list* until the summed certified error meets a [`Threshold`], and returns
 //! the radiance, the certified error bound and the work done.
+//! [`Shading::shade_batch`] shades many points at once, neighbouring points
+//! sharing one certified cut (each still with its own certified bound).
 //!
 //! ```
 //! use manylights::{Lambert, LightTree, PointLight, Threshold};

@@ -7,8 +7,8 @@ mod common;
 use common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::Vec3;
 use manylights::{
-    Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query, ShadeError,
-    ShadeResult, Threshold, Unoccluded, Visibility,
+    Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query,
+    ShadeError, ShadeResult, Threshold, Unoccluded, Visibility,
 };
 use proptest::prelude::*;
 
@@ -326,7 +326,11 @@ fn the_parallel_batch_gives_the_same_bits() {
     // shaded alone.
     queries.extend((0..64).map(|k| {
         let x = (k * 977 % 30_000) as f32;
-        Query::new(Vec3::new(x, (k % 7) as f32 - 3.0, 0.5), Vec3::new(0.1, 0.0, 1.0)).unwrap()
+        Query::new(
+            Vec3::new(x, (k % 7) as f32 - 3.0, 0.5),
+            Vec3::new(0.1, 0.0, 1.0),
+        )
+        .unwrap()
     }));
     let mut shading = tree.shading(Lambert::new(Vec3::new(0.8, 0.6, 0.4)));
     for t in [
@@ -358,7 +362,10 @@ fn a_wall_across_the_street_is_asked_once_per_group() {
     let stats = shading
         .shade_batch(&queries, t, &mut host, &mut results)
         .unwrap();
-    assert!(stats.shared_points as usize >= queries.len() * 9 / 10, "{stats:?}");
+    assert!(
+        stats.shared_points as usize >= queries.len() * 9 / 10,
+        "{stats:?}"
+    );
     assert!(stats.shared_classifications > 0, "{stats:?}");
     let mut unshadowed = vec![placeholder(); queries.len()];
     shading

@@ -65,6 +65,7 @@ fn check_all(lights: &[PointLight], p: Vec3, n: Vec3, v: Vec3) -> DVec3 {
             assert_contract(&format!("lambert {kind:?} {t:?}"), &r, exact);
         }
     }
+    check_batch(&tree, lights, p, n);
     for e in EXPONENTS {
         let mut s = tree.shading(Phong::new(Vec3::new(0.3, 0.6, 0.9), e));
         let exact = s.exact_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), Unoccluded);
@@ -95,6 +96,32 @@ fn check_all(lights: &[PointLight], p: Vec3, n: Vec3, v: Vec3) -> DVec3 {
         }
     }
     diffuse
+}
+
+/// Shades `p` in a batch with a patch of neighbours around it (spread over
+/// a thousandth of the scene) and checks every result's contract.
+fn check_batch(tree: &LightTree, lights: &[PointLight], p: Vec3, n: Vec3) {
+    let (mut lo, mut hi) = (p, p);
+    for l in lights {
+        (lo, hi) = (lo.min(l.position), hi.max(l.position));
+    }
+    let step = (hi - lo).max_element() * 1e-3;
+    let (u, v) = n.normalize().any_orthonormal_pair();
+    let queries: Vec<Query> = (0..49)
+        .map(|k| p + (u * (k % 7 - 3) as f32 + v * (k / 7 - 3) as f32) * step)
+        .filter(|q| q.is_finite())
+        .map(|q| Query::new(q, n).unwrap())
+        .collect();
+    let mut s = tree.shading(Lambert::new(Vec3::new(0.9, 0.5, 0.2)));
+    let mut results = vec![s.shade(p, n, Threshold::exact()).unwrap(); queries.len()];
+    for t in thresholds() {
+        s.shade_batch(&queries, t, Unoccluded, &mut results)
+            .unwrap();
+        for (q, r) in queries.iter().zip(&results) {
+            let exact = s.exact_query(q, Unoccluded);
+            assert_contract(&format!("batch at {} {t:?}", q.point()), r, exact);
+        }
+    }
 }
 
 /// A deterministic generator (xorshift), so the cases need no seed file.

@@ -921,10 +921,12 @@ impl<S: Shader> Shading<'_, S> {
             let bound = packed_bound(error + light_error, scratch.packed.len());
             let largest = scratch.list.largest();
             let nodes = scratch.list.len() as u32;
-            let lights = (scratch.lights.len() + scratch.above.len() + scratch.shadowed.len()) as u32;
+            let lights =
+                (scratch.lights.len() + scratch.above.len() + scratch.shadowed.len()) as u32;
             let mut darkest = f64::INFINITY;
             for (k, &i) in members.iter().enumerate() {
-                let (radiance, rays) = self.point_sum(&queries[i as usize], scratch, cut.visibility);
+                let (radiance, rays) =
+                    self.point_sum(&queries[i as usize], scratch, cut.visibility);
                 scratch.results[k] = ShadeResult {
                     radiance,
                     error_bound: bound,
