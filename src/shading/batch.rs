@@ -850,8 +850,7 @@ impl<S: Shader> Shading<'_, S> {
         let samples = Samples::new(queries, members);
         let mut scratch = core::mem::take(&mut self.scratch.batch);
         let outcome = self.shared_cut(
-            queries,
-            members,
+            (queries, members),
             threshold,
             visibility,
             stats,
@@ -865,8 +864,7 @@ impl<S: Shader> Shading<'_, S> {
     /// [`shade_shared`](Self::shade_shared) with its scratch taken out.
     fn shared_cut<M, V: Visibility>(
         &self,
-        queries: &[Query<M>],
-        members: &[u32],
+        (queries, members): (&[Query<M>], &[u32]),
         threshold: &Threshold,
         visibility: &mut V,
         stats: &mut BatchStats,
