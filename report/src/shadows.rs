@@ -5,7 +5,7 @@
 //! `Visibility` trait.
 
 use glam::{Vec2, Vec3, Vec3A};
-use manylights::{Aabb, Coverage, NodeRegion, Visibility};
+use manylights::{Aabb, Coverage, NodeRegion, PointGroup, Visibility};
 use obvhs::aabb::Aabb as BvhAabb;
 
 use crate::bvh::{Occluders, Segment, corners};
@@ -197,6 +197,58 @@ impl<'o> Shadows<'o> {
         })
     }
 
+    /// Classifies the box `target` as seen from every point of the box
+    /// `points` (shading points, lifted here), for a batch of points that
+    /// share this host's normal: `Occluded` when one occluder, shrunk by
+    /// [`MARGIN`], meets all 64 segments between the corners of the two
+    /// boxes (the points from which every segment to `target` meets a convex
+    /// occluder form a convex set, and so do the targets seen through it
+    /// from one point, so the corners decide); `Visible` when no occluder,
+    /// grown by [`MARGIN`], meets the shaft of the two boxes, which holds
+    /// their convex hull (every segment between them); `Partial` otherwise.
+    pub fn classify_boxes(&mut self, points: &Aabb, target: &Aabb) -> Coverage {
+        let from = Aabb {
+            min: points.min + self.lift,
+            max: points.max + self.lift,
+        };
+        let (a, b) = (0.5 * (from.min + from.max), 0.5 * (target.min + target.max));
+        let between = Segment::new(a, b);
+        let mut segments: Option<Vec<Segment>> = None;
+        let (mut tried, mut occluded, mut centre_blocked) = (0, false, false);
+        self.occluders.any_along(a, b, |o| {
+            centre_blocked |= between.hits(o);
+            let core = BvhAabb::new(o.min + MARGIN, o.max - MARGIN);
+            if !(core.valid() && between.hits(&core)) {
+                return false;
+            }
+            tried += 1;
+            occluded = segments
+                .get_or_insert_with(|| {
+                    let ends = corners(target);
+                    corners(&from)
+                        .iter()
+                        .flat_map(|&p| ends.map(|q| Segment::new(p, q)))
+                        .collect()
+                })
+                .iter()
+                .all(|s| s.hits(&core));
+            occluded || tried == OCCLUDER_CANDIDATES
+        });
+        if occluded {
+            return self.answer(Coverage::Occluded);
+        }
+        if centre_blocked {
+            return self.answer(Coverage::Partial);
+        }
+        let shaft = Shaft::between(&from, target, MARGIN);
+        let meets = |o: &BvhAabb| shaft.meets(o);
+        self.answer(if self.occluders.any_in(meets, meets) {
+            Coverage::Partial
+        } else {
+            Coverage::Visible
+        })
+    }
+
     /// One shadow ray from the lifted point `apex`, counted.
     fn ray(&mut self, apex: Vec3, to: Vec3) -> bool {
         self.rays += 1;
@@ -205,9 +257,18 @@ impl<'o> Shadows<'o> {
 }
 
 impl Visibility for Shadows<'_> {
+    /// Groups of points are classified too, for batches whose points share
+    /// the host's normal (the lift).
+    const CLASSIFIES_GROUPS: bool = true;
+
     /// [`Shadows::classify_box`] of the node's box.
     fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
         self.classify_box(point, &node.aabb)
+    }
+
+    /// [`Shadows::classify_boxes`] of the points' box and the node's box.
+    fn classify_group(&mut self, group: &PointGroup, node: &NodeRegion) -> Coverage {
+        self.classify_boxes(&group.aabb, &node.aabb)
     }
 
     /// One any-hit shadow ray: the segment from the lifted point to the
@@ -318,6 +379,56 @@ impl Shaft {
         shaft
     }
 
+    /// The shaft between the boxes `a` and `b`, every face pushed out by
+    /// `margin`: their bounding box and, in each projection along an axis,
+    /// the lines through the edges of the two rectangles' convex hull that
+    /// join one rectangle to the other (at most two per projection), each a
+    /// half-space holding the hull of the boxes.
+    pub fn between(a: &Aabb, b: &Aabb, margin: f32) -> Shaft {
+        let mut shaft = Shaft {
+            min: Vec3A::from(a.min.min(b.min)) - margin,
+            max: Vec3A::from(a.max.max(b.max)) + margin,
+            normal: [[0.0; PLANE_LANES]; 3],
+            offset: [f32::INFINITY; PLANE_LANES],
+        };
+        let mut count = 0;
+        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+            let rect = |r: &Aabb| {
+                let (lo, hi) = (Vec2::new(r.min[i], r.min[j]), Vec2::new(r.max[i], r.max[j]));
+                [lo, Vec2::new(hi.x, lo.y), hi, Vec2::new(lo.x, hi.y)]
+            };
+            let mut points: Vec<(Vec2, bool)> = rect(a)
+                .into_iter()
+                .map(|p| (p, false))
+                .chain(rect(b).into_iter().map(|p| (p, true)))
+                .collect();
+            let all: Vec<Vec2> = points.iter().map(|p| p.0).collect();
+            for (p, q) in hull(&mut points) {
+                if p.1 == q.1 {
+                    continue; // an edge of one rectangle: the bounding box holds it
+                }
+                let u = q.0 - p.0;
+                // Counter-clockwise hull: the outward normal is to the right.
+                let n = Vec2::new(u.y, -u.x);
+                if n == Vec2::ZERO {
+                    continue;
+                }
+                // The largest value over all eight corners, so that the
+                // half-plane holds the hull whatever the rounding.
+                let reach = all
+                    .iter()
+                    .map(|c| n.dot(*c))
+                    .fold(f32::NEG_INFINITY, f32::max);
+                debug_assert!(count < PLANE_LANES, "two joining edges per projection");
+                shaft.normal[i][count] = n.x;
+                shaft.normal[j][count] = n.y;
+                shaft.offset[count] = reach + margin * (n.x.abs() + n.y.abs());
+                count += 1;
+            }
+        }
+        shaft
+    }
+
     /// Whether the box `b` may meet the shaft: `false` only when it lies
     /// outside the bounding box or wholly beyond one plane.
     #[inline]
@@ -338,5 +449,114 @@ impl Shaft {
             *out = sum > self.offset[k];
         }
         !beyond.iter().any(|&x| x)
+    }
+}
+
+/// The edges of the convex hull of `points` (each tagged), counter-clockwise
+/// (Andrew's monotone chain; collinear points dropped).
+fn hull(points: &mut [(Vec2, bool)]) -> Vec<((Vec2, bool), (Vec2, bool))> {
+    points.sort_by(|a, b| a.0.x.total_cmp(&b.0.x).then(a.0.y.total_cmp(&b.0.y)));
+    let cross = |o: Vec2, a: Vec2, b: Vec2| (a - o).perp_dot(b - o);
+    let mut chain: Vec<(Vec2, bool)> = Vec::with_capacity(2 * points.len());
+    for pass in 0..2 {
+        let start = chain.len();
+        let ordered: Box<dyn Iterator<Item = &(Vec2, bool)>> = if pass == 0 {
+            Box::new(points.iter())
+        } else {
+            Box::new(points.iter().rev())
+        };
+        for &p in ordered {
+            while chain.len() >= start + 2
+                && cross(chain[chain.len() - 2].0, chain[chain.len() - 1].0, p.0) <= 0.0
+            {
+                chain.pop();
+            }
+            chain.push(p);
+        }
+        chain.pop(); // the last point starts the other half
+    }
+    (0..chain.len())
+        .map(|k| (chain[k], chain[(k + 1) % chain.len()]))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every point of segments between two boxes lies in their shaft, and a
+    /// box well away from both does not meet it.
+    #[test]
+    fn the_shaft_between_two_boxes_holds_every_segment_between_them() {
+        let a = Aabb {
+            min: Vec3::new(0.0, 0.0, 0.0),
+            max: Vec3::new(1.0, 2.0, 0.5),
+        };
+        let b = Aabb {
+            min: Vec3::new(10.0, 5.0, 3.0),
+            max: Vec3::new(11.0, 5.5, 6.0),
+        };
+        let shaft = Shaft::between(&a, &b, 0.0);
+        let (ca, cb) = (corners(&a), corners(&b));
+        for p in ca {
+            for q in cb {
+                for k in 0..=10 {
+                    let x = p + (q - p) * (k as f32 / 10.0);
+                    let tiny = BvhAabb::new((x - 1e-4).into(), (x + 1e-4).into());
+                    assert!(shaft.meets(&tiny), "{x} outside the shaft");
+                }
+            }
+        }
+        // Beside the segments, inside the bounding box: outside the shaft.
+        let aside = BvhAabb::new(Vec3A::new(9.0, 0.0, 0.0), Vec3A::new(9.5, 0.5, 0.5));
+        assert!(!shaft.meets(&aside));
+    }
+
+    /// A group's answer holds for sampled segments between the two boxes:
+    /// none blocked when visible, all blocked when occluded.
+    #[test]
+    fn group_classifications_hold_for_sampled_segments() {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut boxed = |centre: Vec3, size: f32, next: &mut dyn FnMut() -> f32| {
+            let half = Vec3::new(next(), next(), next()) * size;
+            Aabb {
+                min: centre - half,
+                max: centre + half,
+            }
+        };
+        let walls: Vec<Aabb> = (0..30)
+            .map(|_| {
+                let c = Vec3::new(next(), next(), next()) * 40.0;
+                boxed(c, 4.0, &mut next)
+            })
+            .collect();
+        let occluders = Occluders::new(&walls);
+        let mut answers = [0; 3];
+        for _ in 0..400 {
+            let group = boxed(Vec3::new(next(), next(), 0.0) * 40.0, 1.0, &mut next);
+            let target = boxed(Vec3::new(next(), next(), next()) * 40.0, 2.0, &mut next);
+            let mut host = Shadows::new(&occluders, Vec3::Z);
+            let coverage = host.classify_boxes(&group, &target);
+            let lift = Vec3::Z * SHADOW_OFFSET;
+            let mut pick = |b: &Aabb| b.min + (b.max - b.min) * Vec3::new(next(), next(), next());
+            for _ in 0..64 {
+                let (p, q) = (pick(&group) + lift, pick(&target));
+                let blocked = occluders.blocked(p, q);
+                match coverage {
+                    Coverage::Visible => assert!(!blocked, "visible, but {p} to {q} is blocked"),
+                    Coverage::Occluded => assert!(blocked, "occluded, but {p} to {q} is free"),
+                    Coverage::Partial => {}
+                }
+            }
+            answers[coverage as usize] += 1;
+        }
+        // All three answers occur, so the test checks something.
+        assert!(answers.iter().all(|&a| a > 0), "{answers:?}");
     }
 }
