@@ -523,7 +523,7 @@ mod tests {
             state ^= state << 17;
             (state >> 40) as f32 / (1u64 << 24) as f32
         };
-        let mut boxed = |centre: Vec3, size: f32, next: &mut dyn FnMut() -> f32| {
+        let boxed = |centre: Vec3, size: f32, next: &mut dyn FnMut() -> f32| {
             let half = Vec3::new(next(), next(), next()) * size;
             Aabb {
                 min: centre - half,
