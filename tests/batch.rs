@@ -379,3 +379,31 @@ fn a_wall_across_the_street_is_asked_once_per_group() {
         assert!(r.radiance.max_element() < free.radiance.max_element());
     }
 }
+
+#[test]
+fn interpolation_is_shared_too() {
+    let (tree, queries) = street_patch();
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(0.8)));
+    let t = Threshold::relative(0.01).with_interpolation(2.0);
+    let mut results = vec![placeholder(); queries.len()];
+    let stats = shading
+        .shade_batch(&queries, t, Unoccluded, &mut results)
+        .unwrap();
+    assert!(
+        stats.shared_points as usize >= queries.len() * 9 / 10,
+        "{stats:?}"
+    );
+    let mut plain = vec![placeholder(); queries.len()];
+    shading
+        .shade_batch(&queries, Threshold::relative(0.01), Unoccluded, &mut plain)
+        .unwrap();
+    let mut moved = 0;
+    for ((q, r), p) in queries.iter().zip(&results).zip(&plain) {
+        let exact = shading.exact_query(q, Unoccluded);
+        assert!(r.certifies(exact), "{r:?} against {exact}");
+        assert!(r.error_bound.max_element() <= 0.01 * r.radiance.max_element());
+        moved += usize::from(r.radiance != p.radiance);
+    }
+    // The blend changed the estimates (it refines the last nodes partly).
+    assert!(moved > queries.len() / 2, "{moved}");
+}

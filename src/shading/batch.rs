@@ -6,6 +6,7 @@ use core::ops::Range;
 
 use glam::{DVec3, Vec3};
 
+use super::blend;
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::packed::Packed;
 use super::refine::{region, reported_bound};
@@ -277,6 +278,8 @@ pub(crate) struct BatchScratch {
     /// The nodes and the lights above every plane, packed for the points'
     /// sums.
     packed: Packed,
+    /// Nodes of a blended cut with their weights.
+    weighted: Vec<(u32, f64)>,
     /// Each entry's values at the samples, by slot.
     steer: Vec<[DVec3; SAMPLES]>,
     /// Each member's result in the current round.
@@ -302,6 +305,31 @@ struct SharedCut<'a, V> {
     evaluations: u64,
     /// Points in the group.
     points: u64,
+    /// The excess over the target before the last refinement and that
+    /// node's key, and the excess where the loop stopped: they place the
+    /// interpolation level.
+    last_step: Option<(f64, f64)>,
+    after: f64,
+}
+
+/// What a blend of a shared cut added, to take it out again, and the
+/// blended nodes' summed error.
+#[derive(Clone, Copy, Debug)]
+struct Blend {
+    /// Lengths of the cut's three lists of single lights before the blend.
+    lights: (usize, usize, usize),
+    light_error: DVec3,
+    steer: [DVec3; SAMPLES],
+    error: DVec3,
+}
+
+/// A node entering a shared cut.
+#[derive(Clone, Copy, Debug)]
+struct Entering {
+    /// Visible from every point of the group.
+    visible: bool,
+    /// The shared error, for a node the shared bound covers.
+    error: Option<DVec3>,
 }
 
 /// The cut grew past its allowance: the group is split.
@@ -329,14 +357,15 @@ impl<V: Visibility> SharedCut<'_, V> {
     fn light(
         &mut self,
         scratch: &mut BatchScratch,
-        position: DVec3,
-        intensity: DVec3,
+        (position, intensity): (DVec3, DVec3),
         visible: bool,
         leaf: usize,
+        weight: f64,
     ) {
         if intensity == DVec3::ZERO {
             return;
         }
+        let intensity = intensity * weight;
         let offset = position - self.group.centre;
         let distance = offset.length();
         let height = self.group.normal.dot(offset);
@@ -387,30 +416,21 @@ impl<V: Visibility> SharedCut<'_, V> {
     /// (to be refined whatever its error when the shared bound does not
     /// apply).
     fn enter(&mut self, scratch: &mut BatchScratch, index: usize, visible: bool) {
+        if let Some(entering) = self.entering(scratch, index, visible, 1.0) {
+            self.push(scratch, index, entering);
+        }
+    }
+
+    /// Puts node `index` into the error list as `entering` says.
+    fn push(&mut self, scratch: &mut BatchScratch, index: usize, entering: Entering) {
         let node = &self.tree.nodes[index];
-        if node.intensity == DVec3::ZERO {
-            return;
-        }
-        if node.radius == 0.0 {
-            let (at, intensity) = (node.centroid.as_dvec3(), node.intensity);
-            self.light(scratch, at, intensity, visible, index);
-            return;
-        }
-        self.evaluations += 1;
-        let bound = self.shared_bound(node);
-        if bound == Ok(None) {
-            return;
-        }
-        let Some(visible) = self.ask(visible, &region(node, index)) else {
-            return;
-        };
-        let seen = if visible {
+        let seen = if entering.visible {
             Seen::Visible
         } else {
             Seen::Partial(None)
         };
-        let (entry, values) = match bound {
-            Ok(Some(error)) if visible => (
+        let (entry, values) = match entering.error {
+            Some(error) => (
                 Entry::new(
                     Class::Error,
                     index as u32,
@@ -421,8 +441,7 @@ impl<V: Visibility> SharedCut<'_, V> {
                 self.samples
                     .values(node.centroid.as_dvec3(), node.intensity * self.kd),
             ),
-            // Too near, across some plane, or partly hidden: refined.
-            _ => (
+            None => (
                 Entry::new(
                     Class::Unbounded,
                     index as u32,
@@ -438,6 +457,66 @@ impl<V: Visibility> SharedCut<'_, V> {
         scratch.steer.push(values);
         for (sum, v) in self.steer_waiting.iter_mut().zip(values) {
             *sum += v;
+        }
+    }
+
+    /// What node `index` (known visible for the group if `visible`) is for
+    /// the shared cut: `None` when it drops out (dark, below every plane,
+    /// hidden) or was a single light (put in the cut with blend `weight`),
+    /// else whether it is visible and its shared error, if it has one (none
+    /// when too near, across some plane or partly hidden: it must be
+    /// refined).
+    fn entering(
+        &mut self,
+        scratch: &mut BatchScratch,
+        index: usize,
+        visible: bool,
+        weight: f64,
+    ) -> Option<Entering> {
+        let node = &self.tree.nodes[index];
+        if node.intensity == DVec3::ZERO {
+            return None;
+        }
+        if node.radius == 0.0 {
+            let light = (node.centroid.as_dvec3(), node.intensity);
+            self.light(scratch, light, visible, index, weight);
+            return None;
+        }
+        self.evaluations += 1;
+        let bound = self.shared_bound(node);
+        if bound == Ok(None) {
+            return None;
+        }
+        let visible = self.ask(visible, &region(node, index))?;
+        Some(Entering {
+            visible,
+            error: bound.ok().flatten().filter(|_| visible),
+        })
+    }
+
+    /// Refines `node` with blend `weight`: its lights into the cut, or each
+    /// child through `child(index, entering)`.
+    fn refine(
+        &mut self,
+        scratch: &mut BatchScratch,
+        index: u32,
+        visible: bool,
+        weight: f64,
+        mut child: impl FnMut(&mut Self, &mut BatchScratch, usize, Entering),
+    ) {
+        let node = &self.tree.nodes[index as usize];
+        if node.is_leaf() {
+            for k in node.lights() {
+                let l = self.tree.lights[k];
+                let light = (l.position.as_dvec3(), l.intensity.as_dvec3());
+                self.light(scratch, light, visible, index as usize, weight);
+            }
+        } else {
+            for c in node.children() {
+                if let Some(e) = self.entering(scratch, c, visible, weight) {
+                    child(self, scratch, c, e);
+                }
+            }
         }
     }
 
@@ -469,6 +548,81 @@ impl<V: Visibility> SharedCut<'_, V> {
         Ok(Some(error))
     }
 
+    /// Blends every waiting node whose error lies within `band` of `level`
+    /// with its children, recursively, as the single-point cut does (see
+    /// [`Threshold::with_interpolation`]): the blended nodes and their
+    /// weights go to `scratch.weighted`, single lights into the cut with
+    /// their weights. Returns what [`unblend`](Self::unblend) needs to
+    /// restore the cut and the blended error, or `None` when there is
+    /// nothing to blend or the blend would cost more than the group's
+    /// budget.
+    fn blend(&mut self, scratch: &mut BatchScratch, level: f64, band: f64) -> Option<Blend> {
+        if scratch.list.len() == 0 || !(level > 0.0 && level.is_finite()) {
+            return None;
+        }
+        let mark = Blend {
+            lights: (
+                scratch.lights.len(),
+                scratch.above.len(),
+                scratch.shadowed.len(),
+            ),
+            light_error: self.light_error,
+            steer: self.steer_settled,
+            error: DVec3::ZERO,
+        };
+        let floor = level / band;
+        let ramp = |key: f64| ((key - floor) / (level - floor)).clamp(0.0, 1.0);
+        let mut error = DVec3::ZERO;
+        let mut stack: Vec<(u32, f64, bool)> = Vec::new();
+        scratch.weighted.clear();
+        for (e, _) in scratch.list.waiting() {
+            let alpha = ramp(e.key);
+            if alpha < 1.0 {
+                scratch.weighted.push((e.node, 1.0 - alpha));
+                error += e.error * (1.0 - alpha);
+            }
+            if alpha > 0.0 {
+                stack.push((e.node, alpha, e.seen == Seen::Visible));
+            }
+        }
+        let budget = self.points * BUDGET_PER_POINT;
+        while let Some((node, weight, visible)) = stack.pop() {
+            if self.evaluations > budget {
+                self.unblend(scratch, mark);
+                return None;
+            }
+            self.refine(scratch, node, visible, weight, |_, scratch, c, e| {
+                let c = c as u32;
+                match e.error {
+                    Some(child_error) => {
+                        let alpha = ramp(child_error.max_element());
+                        if alpha < 1.0 {
+                            scratch.weighted.push((c, weight * (1.0 - alpha)));
+                            error += child_error * (weight * (1.0 - alpha));
+                        }
+                        if alpha > 0.0 {
+                            stack.push((c, weight * alpha, true));
+                        }
+                    }
+                    // No shared bound: refined fully.
+                    None => stack.push((c, weight, e.visible)),
+                }
+            });
+        }
+        Some(Blend { error, ..mark })
+    }
+
+    /// Takes the single lights a [`blend`](Self::blend) put into the cut
+    /// out again.
+    fn unblend(&mut self, scratch: &mut BatchScratch, mark: Blend) {
+        let (lights, above, shadowed) = mark.lights;
+        scratch.lights.truncate(lights);
+        scratch.above.truncate(above);
+        scratch.shadowed.truncate(shadowed);
+        self.light_error = mark.light_error;
+        self.steer_settled = mark.steer;
+    }
+
     /// The darkest sample's estimate of the cut.
     fn steering(&self) -> DVec3 {
         let sums = core::array::from_fn(|k| self.steer_settled[k] + self.steer_waiting[k]);
@@ -492,23 +646,29 @@ impl<V: Visibility> SharedCut<'_, V> {
     fn run(
         &mut self,
         scratch: &mut BatchScratch,
-        mut met: impl FnMut(DVec3, DVec3, f64) -> bool,
+        mut excess: impl FnMut(DVec3, DVec3, f64) -> f64,
     ) -> Result<(), TooCostly> {
         loop {
+            let mut before = f64::INFINITY;
             if scratch.list.may_stop() {
                 let largest = scratch.list.largest();
                 let (_, error) = scratch.list.sums();
-                if met(self.steering(), error, largest) {
+                before = excess(self.steering(), error, largest);
+                if before <= 0.0 {
                     let (_, error) = scratch.list.resum();
                     self.resum_steering(scratch);
-                    if met(self.steering(), error, largest) {
+                    before = excess(self.steering(), error, largest);
+                    if before <= 0.0 {
+                        self.after = before;
                         return Ok(());
                     }
                 }
             }
             let Some((top, slot)) = scratch.list.pop_slot() else {
+                self.after = f64::NEG_INFINITY;
                 return Ok(());
             };
+            self.last_step = Some((before, top.key));
             for (sum, v) in self
                 .steer_waiting
                 .iter_mut()
@@ -524,19 +684,10 @@ impl<V: Visibility> SharedCut<'_, V> {
             if cost > self.points * BUDGET_PER_POINT || entries > MAX_CUT_ITEMS {
                 return Err(TooCostly);
             }
-            let node = &self.tree.nodes[top.node as usize];
             let visible = top.seen == Seen::Visible;
-            if node.is_leaf() {
-                for k in node.lights() {
-                    let l = self.tree.lights[k];
-                    let (at, intensity) = (l.position.as_dvec3(), l.intensity.as_dvec3());
-                    self.light(scratch, at, intensity, visible, top.node as usize);
-                }
-            } else {
-                for child in node.children() {
-                    self.enter(scratch, child, visible);
-                }
-            }
+            self.refine(scratch, top.node, visible, 1.0, |cut, scratch, c, e| {
+                cut.push(scratch, c, e);
+            });
         }
     }
 }
@@ -642,8 +793,8 @@ impl<S: Shader> Shading<'_, S> {
     ///
     /// Cuts are shared for shaders that are purely diffuse
     /// ([`Shader::diffuse_albedo`]), with [`Unoccluded`](crate::Unoccluded)
-    /// or a host that classifies groups, and a threshold without a budget,
-    /// maximal contribution or interpolation. Otherwise every point is
+    /// or a host that classifies groups, and a threshold without a budget or
+    /// maximal contribution. Otherwise every point is
     /// shaded on its own, with the same results as calling
     /// [`shade_query`](Self::shade_query) for each.
     ///
@@ -779,7 +930,6 @@ impl<S: Shader> Shading<'_, S> {
             && self.shader.diffuse_albedo().is_some()
             && threshold.budget().is_none()
             && threshold.max_contribution().is_none()
-            && threshold.interpolation().is_none()
     }
 
     /// Shades the queries `members` (indices into `queries`) as one group,
@@ -888,6 +1038,8 @@ impl<S: Shader> Shading<'_, S> {
             steer_waiting: [DVec3::ZERO; SAMPLES],
             evaluations: 0,
             points: members.len() as u64,
+            last_step: None,
+            after: 0.0,
         };
         if !self.tree.nodes.is_empty() {
             cut.enter(scratch, 0, false);
@@ -898,27 +1050,48 @@ impl<S: Shader> Shading<'_, S> {
         scratch.results.resize(members.len(), ShadeResult::EMPTY);
         for round in 0..ROUNDS {
             let outcome = cut.run(scratch, |estimate, error, largest| {
-                threshold.met(estimate * margin, reported_bound(error), largest)
+                threshold.excess(estimate * margin, reported_bound(error), largest)
             });
+            let (_, error) = scratch.list.resum();
+            let largest = scratch.list.largest();
+            // Interpolation across levels: the cut's last nodes blended
+            // with their children, for now (the next round refines the
+            // unblended cut further).
+            let blended = match (&outcome, threshold.interpolation()) {
+                (Ok(()), Some(band)) => {
+                    let level = blend::level(cut.last_step, cut.after, largest);
+                    cut.blend(scratch, level, band)
+                }
+                _ => None,
+            };
             stats.shared_evaluations += cut.evaluations;
             stats.shared_classifications += cut.classifications;
             (cut.evaluations, cut.classifications) = (0, 0);
             outcome?;
             // The points' sums over the cut.
-            let (_, error) = scratch.list.resum();
             scratch.packed.clear();
-            for (e, _) in scratch.list.waiting() {
-                scratch
-                    .packed
-                    .push_node(&self.tree.nodes[e.node as usize], kd);
-            }
+            let error = match &blended {
+                Some(b) => {
+                    for &(node, weight) in &scratch.weighted {
+                        let node = &self.tree.nodes[node as usize];
+                        scratch.packed.push_node(node, kd * weight);
+                    }
+                    b.error * (1.0 + scratch.weighted.len() as f64 * f64::EPSILON)
+                }
+                None => {
+                    for (e, _) in scratch.list.waiting() {
+                        let node = &self.tree.nodes[e.node as usize];
+                        scratch.packed.push_node(node, kd);
+                    }
+                    error
+                }
+            };
             for &(position, intensity) in &scratch.above {
                 scratch.packed.push_light(position.as_vec3(), intensity);
             }
             let light_error = cut.light_error * (1.0 + scratch.above.len() as f64 * f64::EPSILON);
             let bound = packed_bound(error + light_error, scratch.packed.len());
-            let largest = scratch.list.largest();
-            let nodes = scratch.list.len() as u32;
+            let nodes = scratch.packed.len() as u32 - scratch.above.len() as u32;
             let lights =
                 (scratch.lights.len() + scratch.above.len() + scratch.shadowed.len()) as u32;
             let mut darkest = f64::INFINITY;
@@ -938,6 +1111,9 @@ impl<S: Shader> Shading<'_, S> {
                 if alone[k] {
                     darkest = darkest.min(radiance.max_element());
                 }
+            }
+            if let Some(b) = blended {
+                cut.unblend(scratch, b);
             }
             cut.resum_steering(scratch);
             let reference = cut.steering().max_element();
