@@ -37,13 +37,11 @@ use std::path::Path;
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
-use manylights::{
-    BatchStats, Lambert, LightTree, Query, ShadeError, ShadeResult, Shading, Threshold, Unoccluded,
-};
+use manylights::{BatchStats, Lambert, LightTree, Query, ShadeResult, Threshold, Unoccluded};
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::compare::{max_ratio, timed};
+use crate::compare::{max_ratio, placeholder, timed};
 use crate::config::{SEED, SOA_TOLERANCE};
 use crate::exact::SoaLights;
 use crate::image::{exposure, write_comparison, write_radiance};
@@ -122,19 +120,6 @@ struct SeamRow {
     items: f64,
     micros: f64,
     stats: Option<BatchStats>,
-}
-
-/// A result to fill the output slice of a batch call with: the root alone
-/// (budget 1) at `query`.
-pub fn placeholder<M>(
-    shading: &mut Shading<'_, Lambert>,
-    query: &Query<M>,
-) -> Result<ShadeResult, ShadeError>
-where
-    Lambert: manylights::Accepts<M>,
-{
-    let root_only = Threshold::absolute(f64::INFINITY).with_budget(1);
-    shading.shade_query(query, root_only, Unoccluded)
 }
 
 /// The ground point each pixel of `camera`'s image sees (`None` for the
