@@ -23,10 +23,10 @@
 use std::error::Error;
 
 use glam::Vec3;
-use manylights::Threshold;
+use manylights::{ShadeResult, Threshold};
 use manylights_report::compare::{ErrorStats, print_comparison, print_row};
 use manylights_report::options::Options;
-use manylights_report::raycast::{CityView, Shot};
+use manylights_report::raycast::{CityView, Hit, Shot};
 
 /// A 2 km city of 50 x 50 blocks; both renders take well under a minute.
 const BLOCKS: u32 = 50;
@@ -37,6 +37,25 @@ const SHOT: Shot = (
     Vec3::new(870.0, 640.0, 0.0),
     45.0,
 );
+
+/// Mean work per pixel (node estimates and single lights) on the pixels
+/// whose hit passes `keep`, and how many there are.
+fn work_on(
+    view: &CityView,
+    results: &[Option<ShadeResult>],
+    keep: impl Fn(&Hit) -> bool,
+) -> String {
+    let (count, work) = view
+        .hits
+        .iter()
+        .zip(results)
+        .filter_map(|(hit, r)| Some((hit.as_ref()?, r.as_ref()?)))
+        .filter(|(hit, _)| keep(hit))
+        .fold((0u64, 0u64), |(n, w), (_, r)| {
+            (n + 1, w + u64::from(r.cost()))
+        });
+    format!("{:.0} ({count} px)", work as f64 / count.max(1) as f64)
+}
 
 fn main() -> Result<(), Box<dyn Error>> {
     let options = Options::parse(100_000, (320, 180));
@@ -58,5 +77,16 @@ fn main() -> Result<(), Box<dyn Error>> {
         "shared node bounds per pixel",
         format!("{:.1}", batch.shared_evaluations as f64 / pixels),
     );
+    let on_ground = |h: &Hit| h.normal.z > 0.5 && h.point.z < 1e-3;
+    let on_roof = |h: &Hit| h.normal.z > 0.5 && h.point.z >= 1e-3;
+    print_row(
+        "work per pixel, streets",
+        work_on(&view, &results, on_ground),
+    );
+    print_row(
+        "work per pixel, facades",
+        work_on(&view, &results, |h| h.normal.z < 0.5),
+    );
+    print_row("work per pixel, roofs", work_on(&view, &results, on_roof));
     view.finish(&options, "city", &results, &exact, &stats)
 }

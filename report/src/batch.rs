@@ -85,6 +85,9 @@ const SEAM_LENGTH: f32 = 320.0;
 const SEAM_START: Vec3 = Vec3::new(10.0, 17.0, 0.0);
 /// Interpolation band of the seams rows.
 const BAND: f64 = 2.0;
+/// Jumps of the relative error between neighbouring scanline points above
+/// this are counted (above the smooth variation at this spacing).
+const JUMP_LEVEL: f64 = 5e-5;
 /// Percentile of the exact image the exposure maps to white.
 const EXPOSURE_PERCENTILE: f64 = 0.995;
 
@@ -117,6 +120,8 @@ struct SeamRow {
     max_error: f64,
     max_jump: f64,
     p99_jump: f64,
+    /// Jumps above [`JUMP_LEVEL`].
+    big_jumps: usize,
     items: f64,
     micros: f64,
     stats: Option<BatchStats>,
@@ -586,6 +591,7 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3) -> Result<(), Box<dyn Er
             max_error: max_error(&results, &exact),
             max_jump: jumps.iter().copied().fold(0.0, f64::max),
             p99_jump: quantile(&jumps, 0.99),
+            big_jumps: jumps.iter().filter(|&&j| j > JUMP_LEVEL).count(),
             items: results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / n,
             micros: median(times) * 1e6 / n,
             errors,
@@ -608,10 +614,10 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3) -> Result<(), Box<dyn Er
          only without).\n"
     );
     println!(
-        "| call | interpolation | max rel. error | largest jump | 99th percentile jump | items / \
-        point | time / point | groups | shared points | points alone |"
+        "| call | interpolation | max rel. error | largest jump | 99th percentile jump | jumps > \
+         {JUMP_LEVEL:.0e} | items / point | time / point | groups | shared points | points alone |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
         let (groups, shared, alone) = r.stats.map_or(("-".into(), "-".into(), "-".into()), |s| {
             (
@@ -621,13 +627,14 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3) -> Result<(), Box<dyn Er
             )
         });
         println!(
-            "| {} | {} | {:.2e} | {:.2e} | {:.2e} | {:.0} | {:.1} us | {groups} | {shared} \
+            "| {} | {} | {:.2e} | {:.2e} | {:.2e} | {} | {:.0} | {:.1} us | {groups} | {shared} \
              | {alone} |",
             r.label,
             if r.interpolation { "on" } else { "off" },
             r.max_error,
             r.max_jump,
             r.p99_jump,
+            r.big_jumps,
             r.items,
             r.micros
         );
@@ -635,8 +642,8 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3) -> Result<(), Box<dyn Er
     println!();
 
     let mut text = String::from(
-        "call,interpolation,max_rel_error,max_jump,p99_jump,mean_items,time_per_point_us,groups,\
-         shared_points,points_alone\n",
+        "call,interpolation,max_rel_error,max_jump,p99_jump,jumps_above_5e-5,mean_items,\
+         time_per_point_us,groups,shared_points,points_alone\n",
     );
     for r in &rows {
         let stats = r.stats.map_or(",,".into(), |s| {
@@ -644,8 +651,15 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3) -> Result<(), Box<dyn Er
         });
         let _ = writeln!(
             text,
-            "{},{},{:.6e},{:.6e},{:.6e},{:.1},{:.3},{stats}",
-            r.label, r.interpolation, r.max_error, r.max_jump, r.p99_jump, r.items, r.micros
+            "{},{},{:.6e},{:.6e},{:.6e},{},{:.1},{:.3},{stats}",
+            r.label,
+            r.interpolation,
+            r.max_error,
+            r.max_jump,
+            r.p99_jump,
+            r.big_jumps,
+            r.items,
+            r.micros
         );
     }
     let path = out.join("batch_seams.csv");

@@ -2,7 +2,7 @@
 //! scenes, in one run, after the ground scene's evaluations-per-point table.
 //!
 //! ```text
-//! cargo run --release -p manylights-report                    # full report, about a minute on 2 cores
+//! cargo run --release -p manylights-report                    # full report (see below)
 //! cargo run --release -p manylights-report -- --quick         # smoke run, seconds
 //! cargo run --release -p manylights-report -- city scaling    # only some parts
 //! cargo run --release -p manylights-report -- batch           # batch shading of a camera view
@@ -10,11 +10,14 @@
 //! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
 //! ```
 //!
+//! The full report takes about a minute on 2 cores, plus about a minute and
+//! a half for the batch part (at 10^6 lights; its exact sums dominate).
+//!
 //! Parts: `evaluations` (the ground scene's evaluations per point), `bounds`
 //! (the Lambert bounds on the coloured street city, with build time and
-//! memory), `batch` (a camera's view of the street city at 10^6 lights shaded
-//! by one `shade_batch` call per threshold against the SIMD exact sum, and
-//! the seams along a scanline), `city`, `chandelier`,
+//! memory), `batch` (a camera's view of the street city at 10^6 lights, 10^5
+//! with `--quick`, shaded by one `shade_batch` call per threshold against
+//! the SIMD exact sum, and the seams along a scanline), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
 //! `city-shadows` and `canopy` (the occluded scenes; `shadows` names both)
 //! and `scaling` (time against number of lights); no part named means all.
