@@ -1,5 +1,5 @@
 //! The batch part: a camera's image of the street city shaded through
-//! [`Shading::shade_batch`], one call over every ground pixel, against the
+//! [`Shading::shade_batch`](manylights::Shading::shade_batch), one call over every ground pixel, against the
 //! SIMD exact sum per pixel; and the seams a shared cut leaves along a
 //! scanline.
 //!
@@ -12,7 +12,7 @@
 //! Lambert with unit albedo); sky pixels are black and not shaded.
 //!
 //! For each relative threshold of [`THRESHOLDS`]: the batch call over all
-//! ground pixels (median of [`RUNS`] runs, one core), the SIMD exact sum
+//! ground pixels (median of five runs, one core), the SIMD exact sum
 //! and the single-point `shade_query` on a fixed grid of sampled pixels
 //! spread over the image, the largest actual relative error over the
 //! sampled pixels against the crate's `f64` `exact_query`, and the
@@ -52,9 +52,25 @@ use crate::sweep::median;
 /// The part's name.
 pub const BATCH: &str = "batch";
 
-/// Lights of the full run and of `--quick`.
-const LIGHTS: usize = 1_000_000;
-const QUICK_LIGHTS: usize = 100_000;
+/// Sizes of one run of the part.
+#[derive(Clone, Copy, Debug)]
+pub struct BatchSizes {
+    /// Lights of the street city.
+    pub lights: usize,
+    /// Timed runs of each configuration; the median counts.
+    pub runs: usize,
+}
+
+/// The full run.
+pub const FULL_BATCH: BatchSizes = BatchSizes {
+    lights: 1_000_000,
+    runs: 5,
+};
+/// `--quick`.
+pub const QUICK_BATCH: BatchSizes = BatchSizes {
+    lights: 100_000,
+    runs: 3,
+};
 /// The image.
 const WIDTH: u32 = 320;
 const HEIGHT: u32 = 180;
@@ -72,8 +88,6 @@ const FOV_DEGREES: f32 = 50.0;
 pub const THRESHOLDS: [f64; 6] = [0.01, 0.02, 0.05, 0.1, 0.2, 0.5];
 /// The threshold of the headline and of the single-point comparison.
 const HEADLINE: f64 = 0.01;
-/// Timed runs of each configuration; the median counts.
-const RUNS: usize = 5;
 /// Sampled pixels: the centres of a grid of this many columns and rows of
 /// cells over the image, those that see the ground.
 const SAMPLE_GRID: (u32, u32) = (24, 15);
@@ -150,17 +164,22 @@ pub struct Timing {
     pub ratio: f64,
 }
 
-/// [`RUNS`] rounds of one run of `method` (over `points.0` points) and one
+/// `runs` rounds of one run of `method` (over `points.0` points) and one
 /// of `exact` (over `points.1`), alternating: robust to a machine whose
 /// load drifts.
-fn paired(points: (usize, usize), mut method: impl FnMut(), mut exact: impl FnMut()) -> Timing {
+fn paired(
+    runs: usize,
+    points: (usize, usize),
+    mut method: impl FnMut(),
+    mut exact: impl FnMut(),
+) -> Timing {
     let time = |f: &mut dyn FnMut(), n: usize| {
         let t = Instant::now();
         f();
         t.elapsed().as_secs_f64() * 1e6 / n as f64
     };
     let (mut a, mut b, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..RUNS {
+    for _ in 0..runs {
         let x = time(&mut method, points.0);
         let y = time(&mut exact, points.1);
         a.push(x);
@@ -184,8 +203,8 @@ fn quantile(values: &[f64], q: f64) -> f64 {
 /// Runs the part: prints its tables and headlines, writes its CSV files and
 /// images under `out`; an error if a sampled pixel or a scanline point
 /// breaks its certified bound.
-pub fn run_batch(quick: bool, out: &Path) -> Result<(), Box<dyn Error>> {
-    let count = if quick { QUICK_LIGHTS } else { LIGHTS };
+pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
+    let (count, runs) = (sizes.lights, sizes.runs);
     let lights = city_lights(count, SEED);
     let (tree, build) = timed(|| LightTree::build(&lights));
     let tree = tree?;
@@ -265,6 +284,7 @@ pub fn run_batch(quick: bool, out: &Path) -> Result<(), Box<dyn Error>> {
     let headline = Threshold::relative(HEADLINE);
     let mut single = Vec::with_capacity(samples.len());
     let single_timing = paired(
+        runs,
         (samples.len(), samples.len()),
         || {
             single.clear();
@@ -288,6 +308,7 @@ pub fn run_batch(quick: bool, out: &Path) -> Result<(), Box<dyn Error>> {
         let threshold = Threshold::relative(t);
         let mut stats = Ok(BatchStats::default());
         let timing = paired(
+            runs,
             (queries.len(), samples.len()),
             || stats = shading.shade_batch(&queries, threshold, Unoccluded, &mut results),
             exact_pass,
@@ -317,7 +338,7 @@ pub fn run_batch(quick: bool, out: &Path) -> Result<(), Box<dyn Error>> {
 
     println!(
         "  per pixel: the batch call over all ground pixels and the SIMD exact sum over the \
-         sampled pixels, {RUNS} rounds alternating one run of each; times are medians over the \
+         sampled pixels, {runs} rounds alternating one run of each; times are medians over the \
          rounds, speed-ups the medians of the rounds' ratios. Errors and bound checks against \
          the crate's f64 exact_query at the sampled pixels (the SIMD sum agrees with it to \
          {soa_worst:.1e}).\n"
@@ -395,7 +416,7 @@ pub fn run_batch(quick: bool, out: &Path) -> Result<(), Box<dyn Error>> {
     )?;
 
     let line = corner + SEAM_START;
-    run_seams(out, &tree, line)
+    run_seams(out, &tree, line, runs)
 }
 
 /// Fails if a result breaks its certified bound against `exact`.
@@ -534,7 +555,7 @@ fn write_images(
 /// shaded at 1% by one batch call and by `shade_query` point by point, each
 /// with and without interpolation; prints the table and writes
 /// `batch_seams.csv` and `batch_seams_points.csv`.
-fn run_seams(out: &Path, tree: &LightTree, start: Vec3) -> Result<(), Box<dyn Error>> {
+fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(), Box<dyn Error>> {
     let step = SEAM_LENGTH / (SEAM_POINTS - 1) as f32;
     let points: Vec<Vec3> = (0..SEAM_POINTS)
         .map(|i| start + Vec3::X * (step * i as f32))
@@ -565,7 +586,7 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3) -> Result<(), Box<dyn Er
             discrete
         };
         let (mut stats, mut times) = (None, Vec::new());
-        for _ in 0..RUNS {
+        for _ in 0..runs {
             let started = Instant::now();
             if label == "shade_batch" {
                 stats = Some(shading.shade_batch(&queries, threshold, Unoccluded, &mut results)?);
@@ -609,7 +630,7 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3) -> Result<(), Box<dyn Er
     );
     println!(
         "  relative error = largest channel of (L - exact) / exact against exact_query at every \
-         point; jump = its change between neighbouring points; time: median of {RUNS} runs, one \
+         point; jump = its change between neighbouring points; time: median of {runs} runs, one \
          core. With interpolation the batch call shades every point on its own (it shares cuts \
          only without).\n"
     );

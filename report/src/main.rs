@@ -44,7 +44,7 @@ use std::fs;
 use std::path::Path;
 use std::time::Instant;
 
-use manylights_report::batch::{BATCH, run_batch};
+use manylights_report::batch::{BATCH, FULL_BATCH, QUICK_BATCH, run_batch};
 use manylights_report::bounds::print_bounds_table;
 use manylights_report::config::{
     self, CANOPY, CANOPY_SWEEPS, CITY_SHADOWS_SWEEPS, FULL, OCCLUDED_NAMES, PAPER_RELATIVE,
@@ -117,7 +117,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         print_bounds_table()?;
     }
     if wanted(BATCH) {
-        run_batch(quick, &out)?;
+        run_batch(if quick { QUICK_BATCH } else { FULL_BATCH }, &out)?;
     }
     println!("{METHODS}");
     println!(
