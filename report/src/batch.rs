@@ -1,7 +1,7 @@
 //! The batch part: a camera's image of the street city shaded through
-//! [`Shading::shade_batch`](manylights::Shading::shade_batch), one call over every ground pixel, against the
-//! SIMD exact sum per pixel; and the seams a shared cut leaves along a
-//! scanline.
+//! [`Shading::shade_batch`](manylights::Shading::shade_batch), one call
+//! over every ground pixel, against the SIMD exact sum per pixel; and the
+//! seams a shared cut leaves along a scanline.
 //!
 //! Scene: the street lamps of [`city_lights`] (10^6, or 10^5 with
 //! `--quick`), seen from a camera 30 units above the streets in the middle
