@@ -13,9 +13,12 @@
 //!   al. 1996 and Conty & Kulla 2018) and [`shadowed`] (the exact shadowed
 //!   sum and Ward 1991); [`measure`], the sweeps ([`config`], [`sweep`],
 //!   [`occluded`] for the night city with shadows and the canopy,
-//!   [`scaling`]), [`plot`], [`csv`], [`summary`], and the
-//!   ground scene's evaluations-per-point table ([`evaluations`]).
+//!   [`scaling`]), [`plot`], [`csv`], [`summary`], the
+//!   ground scene's evaluations-per-point table ([`evaluations`]), the
+//!   Lambert bounds on the coloured street city ([`bounds`]) and batch
+//!   shading of a camera view ([`batch`]).
 
+pub mod batch;
 pub mod bounds;
 pub mod bvh;
 pub mod camera;

@@ -2,16 +2,22 @@
 //! scenes, in one run, after the ground scene's evaluations-per-point table.
 //!
 //! ```text
-//! cargo run --release -p manylights-report                    # full report, about a minute on 2 cores
+//! cargo run --release -p manylights-report                    # full report (see below)
 //! cargo run --release -p manylights-report -- --quick         # smoke run, seconds
 //! cargo run --release -p manylights-report -- city scaling    # only some parts
+//! cargo run --release -p manylights-report -- batch           # batch shading of a camera view
 //! cargo run --release -p manylights-report -- shadows         # the occluded scenes alone
 //! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
 //! ```
 //!
+//! The full report takes about a minute on 2 cores, plus about a minute and
+//! a half for the batch part (at 10^6 lights; its exact sums dominate).
+//!
 //! Parts: `evaluations` (the ground scene's evaluations per point), `bounds`
 //! (the Lambert bounds on the coloured street city, with build time and
-//! memory), `city`, `chandelier`,
+//! memory), `batch` (a camera's view of the street city at 10^6 lights, 10^5
+//! with `--quick`, shaded by one `shade_batch` call per threshold against
+//! the SIMD exact sum, and the seams along a scanline), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
 //! `city-shadows` and `canopy` (the occluded scenes; `shadows` names both)
 //! and `scaling` (time against number of lights); no part named means all.
@@ -25,6 +31,9 @@
 //!   crate's certified bound as dashed series);
 //! * `scaling.csv` and `scaling.svg` (time per shading point against number
 //!   of lights, city layout at fixed density);
+//! * `batch.csv`, `batch_seams.csv`, `batch_seams_points.csv`,
+//!   `batch_tree.png` and `batch_small_{tree,exact,diff}.png` (the batch
+//!   part, [`manylights_report::batch`]);
 //! * a Markdown summary on standard output.
 //!
 //! The methods, (a) to (g), and how errors and times are measured are
@@ -35,6 +44,7 @@ use std::fs;
 use std::path::Path;
 use std::time::Instant;
 
+use manylights_report::batch::{BATCH, FULL_BATCH, QUICK_BATCH, run_batch};
 use manylights_report::bounds::print_bounds_table;
 use manylights_report::config::{
     self, CANOPY, CANOPY_SWEEPS, CITY_SHADOWS_SWEEPS, FULL, OCCLUDED_NAMES, PAPER_RELATIVE,
@@ -72,14 +82,14 @@ fn main() -> Result<(), Box<dyn Error>> {
             SHADOWS => parts.extend(OCCLUDED_NAMES.map(String::from)),
             name if SCENE_NAMES.contains(&name)
                 || OCCLUDED_NAMES.contains(&name)
-                || [EVALUATIONS, BOUNDS, SCALING].contains(&name) =>
+                || [EVALUATIONS, BOUNDS, BATCH, SCALING].contains(&name) =>
             {
                 parts.push(arg)
             }
             _ => {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
-                     [{EVALUATIONS} | {BOUNDS} | {} | {} | {SHADOWS} | {SCALING}]...",
+                     [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {SHADOWS} | {SCALING}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -105,6 +115,9 @@ fn main() -> Result<(), Box<dyn Error>> {
     }
     if wanted(BOUNDS) && !quick {
         print_bounds_table()?;
+    }
+    if wanted(BATCH) {
+        run_batch(if quick { QUICK_BATCH } else { FULL_BATCH }, &out)?;
     }
     println!("{METHODS}");
     println!(

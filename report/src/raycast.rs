@@ -1,16 +1,20 @@
 //! Primary rays through the night city: the nearest hit on the ground or a
 //! building, through the BVH over the buildings; and [`CityView`], what the
-//! `city` and `shadows` examples render.
+//! `city` and `shadows` examples render, pixel by pixel or in tiles through
+//! the batch call.
 
 use std::error::Error;
 use std::time::Duration;
 
 use glam::{DVec3, Vec3};
-use manylights::{Lambert, LightTree, ShadeError, ShadeResult, Shading};
+use manylights::{
+    BatchStats, Lambert, LightTree, Query, ShadeError, ShadeResult, Shading, Threshold, Unoccluded,
+};
+use rayon::prelude::*;
 
 use crate::bvh::entry_normal;
 use crate::camera::Camera;
-use crate::compare::{ErrorStats, print_row, shade_pixels, timed};
+use crate::compare::{ErrorStats, placeholder, print_row, shade_pixels, timed};
 use crate::image::write_comparison;
 use crate::options::Options;
 use crate::scenes::{City, GROUND_ALBEDO};
@@ -81,6 +85,10 @@ fn albedo_image(hits: &[Option<Hit>], values: impl Iterator<Item = Option<DVec3>
 
 /// Percentile of the exact image that the exposure maps to white.
 const EXPOSURE_PERCENTILE: f64 = 0.995;
+/// Side of the square pixel tiles of [`CityView::shade_batch`].
+pub const TILE: u32 = 16;
+/// Tiles per batch call of [`CityView::shade_batch`].
+pub const CHUNK_TILES: usize = 8;
 
 /// Where a camera looks at a night city from: eye, target, vertical field
 /// of view in degrees.
@@ -95,6 +103,8 @@ pub struct CityView {
     pub tree: LightTree,
     /// Each pixel's hit, row-major, `None` for the sky.
     pub hits: Vec<Option<Hit>>,
+    /// Image width and height in pixels.
+    pub size: (u32, u32),
     /// Time of the tree build.
     pub build_time: Duration,
     /// Time of the primary rays.
@@ -120,6 +130,7 @@ impl CityView {
             tree: tree?,
             city,
             hits,
+            size: options.size(),
             build_time,
             trace_time,
         })
@@ -136,6 +147,72 @@ impl CityView {
         let session = || self.tree.shading(Lambert::new(Vec3::ONE));
         let (values, time) = timed(|| shade_pixels(&self.hits, session, shade));
         Ok((values?, time))
+    }
+
+    /// Shades every hit pixel through [`Shading::shade_batch`] at
+    /// `threshold`, with unit albedo as [`Self::shade`] and no occluders:
+    /// the image is cut into [`TILE`] x [`TILE`] pixel tiles (row-major, and
+    /// row-major inside a tile), every [`CHUNK_TILES`] consecutive tiles
+    /// make one batch call, and the calls are spread over rayon's threads,
+    /// one session per thread. Returns each pixel's result (`None` for the
+    /// sky), the batch calls' summed statistics, and the time taken
+    /// (queries, shading and gathering the results).
+    pub fn shade_batch(
+        &self,
+        threshold: Threshold,
+    ) -> Result<(Vec<Option<ShadeResult>>, BatchStats, Duration), ShadeError> {
+        let (value, time) = timed(|| self.shade_tiles(threshold));
+        let (results, stats) = value?;
+        Ok((results, stats, time))
+    }
+
+    /// [`Self::shade_batch`], untimed.
+    fn shade_tiles(
+        &self,
+        threshold: Threshold,
+    ) -> Result<(Vec<Option<ShadeResult>>, BatchStats), ShadeError> {
+        let (width, height) = self.size;
+        let mut tiles = Vec::new();
+        for ty in (0..height).step_by(TILE as usize) {
+            for tx in (0..width).step_by(TILE as usize) {
+                let rows = ty..(ty + TILE).min(height);
+                let columns = tx..(tx + TILE).min(width);
+                let pixels: Vec<usize> = rows
+                    .flat_map(|y| columns.clone().map(move |x| (y * width + x) as usize))
+                    .filter(|&i| self.hits[i].is_some())
+                    .collect();
+                tiles.push(pixels);
+            }
+        }
+        let chunks: Vec<Vec<usize>> = tiles.chunks(CHUNK_TILES).map(|c| c.concat()).collect();
+        let session = || self.tree.shading(Lambert::new(Vec3::ONE));
+        let shaded = chunks
+            .par_iter()
+            .map_init(session, |s, pixels| {
+                let queries = pixels
+                    .iter()
+                    .map(|&i| {
+                        let hit = self.hits[i].expect("only hit pixels are queued");
+                        Query::new(hit.point, hit.normal)
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
+                let Some(first) = queries.first() else {
+                    return Ok((Vec::new(), BatchStats::default()));
+                };
+                let mut results = vec![placeholder(s, first)?; queries.len()];
+                let stats = s.shade_batch(&queries, threshold, Unoccluded, &mut results)?;
+                Ok((results, stats))
+            })
+            .collect::<Result<Vec<_>, ShadeError>>()?;
+        let mut image = vec![None; self.hits.len()];
+        let mut total = BatchStats::default();
+        for (pixels, (results, stats)) in chunks.iter().zip(shaded) {
+            for (&i, r) in pixels.iter().zip(results) {
+                image[i] = Some(r);
+            }
+            total += stats;
+        }
+        Ok((image, total))
     }
 
     /// Prints the rows that say what was rendered: lights, buildings (if

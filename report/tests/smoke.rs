@@ -3,6 +3,7 @@
 
 use std::time::Duration;
 
+use manylights_report::batch::{BatchSizes, run_batch};
 use manylights_report::config::{self, Config, SCENE_NAMES};
 use manylights_report::measure::Method;
 use manylights_report::occluded::run_occluded;
@@ -80,4 +81,19 @@ fn scenes_are_reproducible_from_their_seed() {
         windows(7).iter().map(|l| l.position).collect::<Vec<_>>(),
         windows(7).iter().map(|l| l.position).collect::<Vec<_>>()
     );
+}
+
+#[test]
+fn the_batch_part_runs_and_keeps_the_bound() {
+    let out = std::env::temp_dir().join("manylights-report-batch-smoke");
+    std::fs::create_dir_all(&out).unwrap();
+    let sizes = BatchSizes {
+        lights: 2_000,
+        runs: 1,
+    };
+    run_batch(sizes, &out).unwrap();
+    for file in ["batch.csv", "batch_seams.csv", "batch_seams_points.csv"] {
+        let text = std::fs::read_to_string(out.join(file)).unwrap();
+        assert!(text.lines().count() > 2, "{file}");
+    }
 }
