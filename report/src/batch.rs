@@ -397,6 +397,38 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
             "fastest threshold whose largest actual error over the sampled pixels is <= 1%: none\n"
         ),
     }
+    // The same call over the thread pool, against one thread.
+    let headline_threshold = Threshold::relative(HEADLINE);
+    let mut parallel_results = results.clone();
+    let mut parallel_stats = Ok(BatchStats::default());
+    let pool = tree.shading(shader);
+    let threads = paired(
+        runs,
+        (queries.len(), queries.len()),
+        || {
+            parallel_stats = pool.shade_batch_parallel(
+                &queries,
+                headline_threshold,
+                Unoccluded,
+                &mut parallel_results,
+            );
+        },
+        || {
+            black_box(shading.shade_batch(&queries, headline_threshold, Unoccluded, &mut results))
+                .expect("valid threshold");
+        },
+    );
+    parallel_stats?;
+    if parallel_results != results {
+        return Err("shade_batch_parallel differs from shade_batch".into());
+    }
+    println!(
+        "  {} threads (shade_batch_parallel, feature `rayon`) at 1%: {:.2} us per pixel, {:.2}x \
+         one thread (median of {runs} alternating rounds' ratios), the same bits\n",
+        rayon::current_num_threads(),
+        threads.us,
+        threads.ratio
+    );
     write_batch_csv(
         &out.join("batch.csv"),
         tree.len(),
@@ -631,8 +663,8 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
     println!(
         "  relative error = largest channel of (L - exact) / exact against exact_query at every \
          point; jump = its change between neighbouring points; time: median of {runs} runs, one \
-         core. With interpolation the batch call shades every point on its own (it shares cuts \
-         only without).\n"
+         core. With interpolation the batch call blends each shared cut's last nodes with their \
+         children.\n"
     );
     println!(
         "| call | interpolation | max rel. error | largest jump | 99th percentile jump | jumps > \

@@ -847,9 +847,9 @@ impl<S: Shader> Shading<'_, S> {
     }
 
     /// [`shade_batch`](Self::shade_batch) spread over rayon's thread pool:
-    /// the same groups are formed and each is shaded on some thread with
-    /// a session of its own (the shader cloned, the visibility host cloned
-    /// per group), so the results are the same bits as `shade_batch`'s.
+    /// the same groups are formed and shaded in chunks, each chunk on some
+    /// thread with a session of its own (the shader and the visibility host
+    /// cloned), so the results are the same bits as `shade_batch`'s.
     /// Without shared cuts, chunks of the batch are shaded point by point on
     /// the threads.
     ///
@@ -897,20 +897,26 @@ impl<S: Shader> Shading<'_, S> {
         }
         let order = morton_order(queries);
         let runs = group_runs(queries, &order);
+        // A few chunks of runs per thread: each chunk one session, so that
+        // scratch space grows once per chunk, and enough chunks to balance.
+        let chunk = runs.len().div_ceil(8 * rayon::current_num_threads()).max(1);
         let shaded: Vec<(Vec<(u32, ShadeResult)>, BatchStats)> = runs
-            .into_par_iter()
-            .map_init(session, |shading, run| {
-                let mut out = Vec::with_capacity(run.len());
-                let mut stats = BatchStats::default();
+            .par_chunks(chunk)
+            .map(|runs| {
+                let mut shading = session();
                 let mut visibility = visibility.clone();
-                shading.shade_members(
-                    queries,
-                    &order[run],
-                    threshold,
-                    &mut visibility,
-                    &mut |i, r| out.push((i as u32, r)),
-                    &mut stats,
-                )?;
+                let mut out = Vec::new();
+                let mut stats = BatchStats::default();
+                for run in runs {
+                    shading.shade_members(
+                        queries,
+                        &order[run.clone()],
+                        threshold,
+                        &mut visibility,
+                        &mut |i, r| out.push((i as u32, r)),
+                        &mut stats,
+                    )?;
+                }
                 Ok((out, stats))
             })
             .collect::<Result<_, ShadeError>>()?;
