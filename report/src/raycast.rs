@@ -18,6 +18,7 @@ use crate::compare::{ErrorStats, placeholder, print_row, shade_pixels, timed};
 use crate::image::write_comparison;
 use crate::options::Options;
 use crate::scenes::{City, GROUND_ALBEDO};
+use crate::shadows::Shadows;
 
 /// A primary-ray hit: the shading point, its outward normal, its albedo.
 #[derive(Clone, Copy, Debug)]
@@ -161,16 +162,34 @@ impl CityView {
         &self,
         threshold: Threshold,
     ) -> Result<(Vec<Option<ShadeResult>>, BatchStats, Duration), ShadeError> {
-        let (value, time) = timed(|| self.shade_tiles(threshold));
-        let (results, stats) = value?;
+        let (value, time) = timed(|| self.shade_tiles(threshold, false));
+        let (results, stats, _) = value?;
         Ok((results, stats, time))
     }
 
-    /// [`Self::shade_batch`], untimed.
+    /// [`Self::shade_batch`] with the buildings' shadows: in each chunk of
+    /// tiles, one batch call per normal direction (the city's surfaces are
+    /// axis-aligned), each with a [`Shadows`] host for that normal (the host
+    /// lifts its rays along the normal), which classifies nodes for whole
+    /// groups of points. Also returns the hosts' answers (visible,
+    /// occluded, partial) and shadow rays, summed.
+    #[allow(clippy::type_complexity)]
+    pub fn shade_batch_shadowed(
+        &self,
+        threshold: Threshold,
+    ) -> Result<(Vec<Option<ShadeResult>>, BatchStats, [u64; 4], Duration), ShadeError> {
+        let (value, time) = timed(|| self.shade_tiles(threshold, true));
+        let (results, stats, answers) = value?;
+        Ok((results, stats, answers, time))
+    }
+
+    /// [`Self::shade_batch`] (with shadows if `shadows`), untimed.
+    #[allow(clippy::type_complexity)]
     fn shade_tiles(
         &self,
         threshold: Threshold,
-    ) -> Result<(Vec<Option<ShadeResult>>, BatchStats), ShadeError> {
+        shadows: bool,
+    ) -> Result<(Vec<Option<ShadeResult>>, BatchStats, [u64; 4]), ShadeError> {
         let (width, height) = self.size;
         let mut tiles = Vec::new();
         for ty in (0..height).step_by(TILE as usize) {
@@ -197,22 +216,54 @@ impl CityView {
                     })
                     .collect::<Result<Vec<_>, _>>()?;
                 let Some(first) = queries.first() else {
-                    return Ok((Vec::new(), BatchStats::default()));
+                    return Ok((Vec::new(), BatchStats::default(), [0; 4]));
                 };
                 let mut results = vec![placeholder(s, first)?; queries.len()];
-                let stats = s.shade_batch(&queries, threshold, Unoccluded, &mut results)?;
-                Ok((results, stats))
+                if !shadows {
+                    let stats = s.shade_batch(&queries, threshold, Unoccluded, &mut results)?;
+                    return Ok((results, stats, [0; 4]));
+                }
+                // One call per normal, each with its host.
+                let (mut stats, mut answers) = (BatchStats::default(), [0u64; 4]);
+                let mut normals: Vec<Vec3> = Vec::new();
+                for &i in pixels {
+                    let n = self.hits[i].expect("hit").normal;
+                    if !normals.contains(&n) {
+                        normals.push(n);
+                    }
+                }
+                for n in normals {
+                    let members: Vec<usize> = (0..pixels.len())
+                        .filter(|&k| self.hits[pixels[k]].expect("hit").normal == n)
+                        .collect();
+                    let subset: Vec<Query> = members.iter().map(|&k| queries[k]).collect();
+                    let mut out = vec![results[members[0]]; subset.len()];
+                    let mut host = Shadows::new(&self.city.occluders, n);
+                    stats += s.shade_batch(&subset, threshold, &mut host, &mut out)?;
+                    for (&k, r) in members.iter().zip(out) {
+                        results[k] = r;
+                    }
+                    for (a, h) in answers.iter_mut().zip(host.answers) {
+                        *a += u64::from(h);
+                    }
+                    answers[3] += u64::from(host.rays);
+                }
+                Ok((results, stats, answers))
             })
             .collect::<Result<Vec<_>, ShadeError>>()?;
         let mut image = vec![None; self.hits.len()];
         let mut total = BatchStats::default();
-        for (pixels, (results, stats)) in chunks.iter().zip(shaded) {
+        let mut answers = [0u64; 4];
+        for (pixels, (results, stats, a)) in chunks.iter().zip(shaded) {
             for (&i, r) in pixels.iter().zip(results) {
                 image[i] = Some(r);
             }
             total += stats;
+            for (sum, x) in answers.iter_mut().zip(a) {
+                *sum += x;
+            }
         }
-        Ok((image, total))
+        Ok((image, total, answers))
     }
 
     /// Prints the rows that say what was rendered: lights, buildings (if

@@ -59,9 +59,16 @@ const GROUP_MIN_POINTS: usize = 4;
 /// A point joins the group being formed only if its normal is within this
 /// distance (`|n - n_first|`, about 29 degrees) of the group's first normal.
 const GROUP_NORMAL_SPREAD: f64 = 0.5;
-/// What a group's shared cut may cost, per point, in node bounds, before
-/// the group is split: about what a point shaded on its own costs.
-const BUDGET_PER_POINT: u64 = 100;
+/// What a group's shared cut may cost, per point, before the group is split:
+/// this share of what a point shaded on its own costs (node bounds, single
+/// lights and host queries), as measured on the points shaded alone so far
+/// in the chunk of groups; at least [`MIN_BUDGET_PER_POINT`].
+const BUDGET_SHARE: f64 = 0.4;
+const MIN_BUDGET_PER_POINT: u64 = 32;
+/// Groups shaded with one running estimate of the cost of a point shaded
+/// alone, started afresh for each chunk (so that a batch shaded over
+/// threads, chunk by chunk, gives the same results).
+const CHUNK_RUNS: usize = 16;
 /// Entries a point sums over a shared cut in the time of one shared node
 /// bound (measured: about 50 instructions an entry, 1,500 a bound).
 const ENTRIES_PER_BOUND: u64 = 32;
@@ -284,6 +291,8 @@ pub(crate) struct BatchScratch {
     steer: Vec<[DVec3; SAMPLES]>,
     /// Each member's result in the current round.
     results: Vec<ShadeResult>,
+    /// Running estimate of what a point shaded alone costs (0: none yet).
+    alone_cost: f64,
 }
 
 /// One group's cut in the making.
@@ -305,6 +314,8 @@ struct SharedCut<'a, V> {
     evaluations: u64,
     /// Points in the group.
     points: u64,
+    /// What the cut may cost per point (see [`BUDGET_SHARE`]).
+    budget_per_point: u64,
     /// The excess over the target before the last refinement and that
     /// node's key, and the excess where the loop stopped: they place the
     /// interpolation level.
@@ -585,7 +596,7 @@ impl<V: Visibility> SharedCut<'_, V> {
                 stack.push((e.node, alpha, e.seen == Seen::Visible));
             }
         }
-        let budget = self.points * BUDGET_PER_POINT;
+        let budget = self.points * self.budget_per_point;
         while let Some((node, weight, visible)) = stack.pop() {
             if self.evaluations > budget {
                 self.unblend(scratch, mark);
@@ -681,7 +692,7 @@ impl<V: Visibility> SharedCut<'_, V> {
             // node bound.
             let rays = scratch.shadowed.len() as u64 * self.points;
             let cost = self.evaluations + rays + entries as u64 * self.points / ENTRIES_PER_BOUND;
-            if cost > self.points * BUDGET_PER_POINT || entries > MAX_CUT_ITEMS {
+            if cost > self.points * self.budget_per_point || entries > MAX_CUT_ITEMS {
                 return Err(TooCostly);
             }
             let visible = top.seen == Seen::Visible;
@@ -833,15 +844,18 @@ impl<S: Shader> Shading<'_, S> {
             return Ok(stats);
         }
         let order = morton_order(queries);
-        for run in group_runs(queries, &order) {
-            self.shade_members(
-                queries,
-                &order[run],
-                threshold,
-                &mut visibility,
-                &mut |i, r| results[i] = r,
-                &mut stats,
-            )?;
+        for chunk in group_runs(queries, &order).chunks(CHUNK_RUNS) {
+            self.scratch.batch.alone_cost = 0.0;
+            for run in chunk {
+                self.shade_members(
+                    queries,
+                    &order[run.clone()],
+                    threshold,
+                    &mut visibility,
+                    &mut |i, r| results[i] = r,
+                    &mut stats,
+                )?;
+            }
         }
         Ok(stats)
     }
@@ -897,11 +911,9 @@ impl<S: Shader> Shading<'_, S> {
         }
         let order = morton_order(queries);
         let runs = group_runs(queries, &order);
-        // A few chunks of runs per thread: each chunk one session, so that
-        // scratch space grows once per chunk, and enough chunks to balance.
-        let chunk = runs.len().div_ceil(8 * rayon::current_num_threads()).max(1);
+        // The chunks of `shade_batch`, each with a session of its own.
         let shaded: Vec<(Vec<(u32, ShadeResult)>, BatchStats)> = runs
-            .par_chunks(chunk)
+            .par_chunks(CHUNK_RUNS)
             .map(|runs| {
                 let mut shading = session();
                 let mut visibility = visibility.clone();
@@ -956,23 +968,26 @@ impl<S: Shader> Shading<'_, S> {
         if members.len() < GROUP_MIN_POINTS {
             for &i in members {
                 let i = i as usize;
-                write(
-                    i,
-                    self.shade_query(&queries[i], threshold, &mut *visibility)?,
-                );
+                write(i, self.shade_alone(&queries[i], threshold, &mut *visibility)?);
             }
             stats.points_alone += members.len() as u32;
             return Ok(());
+        }
+        if self.scratch.batch.alone_cost == 0.0 {
+            // No estimate yet of what sharing must beat: the first point
+            // alone.
+            let i = members[0] as usize;
+            write(i, self.shade_alone(&queries[i], threshold, &mut *visibility)?);
+            stats.points_alone += 1;
+            let rest = &members[1..];
+            return self.shade_members(queries, rest, threshold, visibility, write, stats);
         }
         match self.shade_shared(queries, members, &threshold, visibility, stats) {
             Ok(alone) => {
                 for (k, &i) in members.iter().enumerate() {
                     let i = i as usize;
                     if alone[k] {
-                        write(
-                            i,
-                            self.shade_query(&queries[i], threshold, &mut *visibility)?,
-                        );
+                        write(i, self.shade_alone(&queries[i], threshold, &mut *visibility)?);
                     } else {
                         write(i, self.scratch.batch.results[k]);
                     }
@@ -985,6 +1000,29 @@ impl<S: Shader> Shading<'_, S> {
                 self.shade_members(queries, b, threshold, visibility, write, stats)
             }
         }
+    }
+
+    /// [`shade_query`](Self::shade_query) for a point of a batch shaded on
+    /// its own, its cost (node bounds, lights, host queries) folded into the
+    /// running estimate that sets the groups' budgets.
+    fn shade_alone<M, V: Visibility>(
+        &mut self,
+        query: &Query<M>,
+        threshold: Threshold,
+        visibility: V,
+    ) -> Result<ShadeResult, ShadeError>
+    where
+        S: Accepts<M>,
+    {
+        let r = self.shade_query(query, threshold, visibility)?;
+        let cost = f64::from(r.cost()) + f64::from(r.classify_queries) + f64::from(r.point_queries);
+        let estimate = &mut self.scratch.batch.alone_cost;
+        *estimate = if *estimate == 0.0 {
+            cost.max(1.0)
+        } else {
+            0.875 * *estimate + 0.125 * cost
+        };
+        Ok(r)
     }
 
     /// Picks a shared cut for `members` and shades them through it; fills
@@ -1044,6 +1082,8 @@ impl<S: Shader> Shading<'_, S> {
             steer_waiting: [DVec3::ZERO; SAMPLES],
             evaluations: 0,
             points: members.len() as u64,
+            budget_per_point: ((BUDGET_SHARE * scratch.alone_cost) as u64)
+                .max(MIN_BUDGET_PER_POINT),
             last_step: None,
             after: 0.0,
         };
