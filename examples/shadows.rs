@@ -92,7 +92,12 @@ fn main() -> Result<(), Box<dyn Error>> {
     let single_results: Vec<Option<ShadeResult>> = single.iter().map(|s| s.map(|s| s.0)).collect();
     let single_stats = ErrorStats::new(&single_results, &exact);
     let per_pixel = |f: fn(&(ShadeResult, u32, u32)) -> u32| {
-        single.iter().flatten().map(|s| f64::from(f(s))).sum::<f64>() / pixels
+        single
+            .iter()
+            .flatten()
+            .map(|s| f64::from(f(s)))
+            .sum::<f64>()
+            / pixels
     };
     print_row(
         "pixel by pixel (shade_query)",

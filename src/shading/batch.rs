@@ -810,10 +810,13 @@ impl<S: Shader> Shading<'_, S> {
     /// [`shade_query`](Self::shade_query) for each.
     ///
     /// Speed: on a 10^6-light street city seen from above the streets, one
-    /// core, certified 1% per pixel, the batch call is some hundreds of
-    /// times faster than a vectorized exact sum and several times faster
-    /// than shading each pixel on its own (`cargo run --release -p
-    /// manylights-report -- batch` measures it).
+    /// core, certified 1% per pixel, the batch call took 4.1 us per pixel,
+    /// 434 times less than a vectorized exact sum and 7.5 times less than
+    /// shading each pixel on its own (one run of `cargo run --release -p
+    /// manylights-report -- batch`).
+    ///
+    /// Allocation: a call allocates its Morton order and group list (linear
+    /// in the batch); the session's scratch space is reused across calls.
     ///
     /// # Errors
     /// [`ShadeError::BatchLength`] when `results` is not as long as
@@ -968,7 +971,10 @@ impl<S: Shader> Shading<'_, S> {
         if members.len() < GROUP_MIN_POINTS {
             for &i in members {
                 let i = i as usize;
-                write(i, self.shade_alone(&queries[i], threshold, &mut *visibility)?);
+                write(
+                    i,
+                    self.shade_alone(&queries[i], threshold, &mut *visibility)?,
+                );
             }
             stats.points_alone += members.len() as u32;
             return Ok(());
@@ -977,7 +983,10 @@ impl<S: Shader> Shading<'_, S> {
             // No estimate yet of what sharing must beat: the first point
             // alone.
             let i = members[0] as usize;
-            write(i, self.shade_alone(&queries[i], threshold, &mut *visibility)?);
+            write(
+                i,
+                self.shade_alone(&queries[i], threshold, &mut *visibility)?,
+            );
             stats.points_alone += 1;
             let rest = &members[1..];
             return self.shade_members(queries, rest, threshold, visibility, write, stats);
@@ -987,7 +996,10 @@ impl<S: Shader> Shading<'_, S> {
                 for (k, &i) in members.iter().enumerate() {
                     let i = i as usize;
                     if alone[k] {
-                        write(i, self.shade_alone(&queries[i], threshold, &mut *visibility)?);
+                        write(
+                            i,
+                            self.shade_alone(&queries[i], threshold, &mut *visibility)?,
+                        );
                     } else {
                         write(i, self.scratch.batch.results[k]);
                     }
