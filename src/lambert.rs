@@ -518,18 +518,9 @@ impl Lambert {
         let c0 = geo.z;
         let inv_rho = geo.inv_rho;
         let inv_d = cone.inv_distance;
-        let inv_d2 = inv_d * inv_d;
         let sigma = cone.sin_half_angle;
 
         let series = degree_two(n, cone, node);
-        let o = node.channel_offsets.map(|v| v.as_dvec3());
-        let offset_lens = DVec3::new(
-            o[0].abs().element_sum(),
-            o[1].abs().element_sum(),
-            o[2].abs().element_sum(),
-        ) * inv_d;
-        let mu2 = node.mean_squared_radii() * inv_d2;
-
         // Remainder in units of I_k / D^2. The quantities it grows with,
         // widened for their input rounding (see SERIES_SLACK).
         let ac = c0.abs() + SERIES_SLACK;
@@ -541,33 +532,7 @@ impl Lambert {
         let (lo, hi) = (node.aabb.min.as_dvec3() - c, node.aabb.max.as_dvec3() - c);
         let reach = nperp.dot(0.5 * (lo + hi)).abs() + nperp.abs().dot(0.5 * (hi - lo));
         let hperp = (reach + SERIES_SLACK * cone.radius) * inv_d;
-        let (c2, nu2) = (ac * ac, nu * nu);
-        let mut remainder = DVec3::ZERO;
-        // mu_(m-1) <= sigma^(m-3) mu_2 and sigma^m, from m = 3.
-        let mut mu_prev = mu2;
-        let mut sigma_m = sigma * sigma * sigma;
-        for (d, q) in node.harmonic_norms.iter().enumerate() {
-            let m = (d + 3) as f64;
-            let q = q.as_dvec3() * sigma_m;
-            let harmonic = (c2 * (m + 1.0) * (m + 1.0) + nu2 * (0.5 * m * (m + 1.0))).sqrt();
-            let across = q * (ac * (m + 1.0)) + mu_prev * (hperp * 0.5 * m * (m + 1.0));
-            remainder += (q * harmonic).min(across);
-            mu_prev *= sigma;
-            sigma_m *= sigma;
-        }
-        // Tail from degree 6: mu_5 = mu_prev, mu_6 <= sigma mu_5.
-        let mu6 = mu_prev * sigma;
-        let (g1, g2) = tail_sums(sigma, inv_rho);
-        let tail = mu6 * g1;
-        remainder += tail.min(tail * ac + mu_prev * (hperp * g2));
-
-        let remainder = remainder * (1.0 + SERIES_SLACK * inv_rho);
-        let sums = f64::from(node.light_count) * f64::EPSILON * sigma * (1.0 + 18.0 * sigma);
-        let slack = SERIES_SLACK * (1.0 + offset_lens + mu2)
-            + f32::EPSILON as f64 * (offset_lens + 33.0 * mu2)
-            + sums
-            + POINT_SLACK * inv_rho * inv_rho * inv_rho;
-        let width = remainder + slack;
+        let width = series_width(node, (inv_d, sigma, inv_rho), (ac, nu * nu, hperp));
         (
             scale * (series - width),
             scale * (series + width + geo.straddle),
@@ -611,35 +576,52 @@ pub(crate) struct SharedView {
 /// member above the plane; and `I_k / D_p^2 <= I_k / D^2`.
 pub(crate) fn shared_width(node: &Node, view: &SharedView) -> DVec3 {
     let inv_d = view.inv_nearest;
-    let inv_d2 = inv_d * inv_d;
     let radius = f64::from(node.radius);
     let sigma = radius * inv_d;
     let inv_rho = 1.0 / (1.0 - sigma);
+    let ac = view.cosine.min(1.0) + SERIES_SLACK;
+    let hperp = (view.height + (view.tilt + ac + SERIES_SLACK) * radius) * inv_d;
+    series_width(node, (inv_d, sigma, inv_rho), (ac, 1.0, hperp))
+}
+
+/// The width of the series interval, per channel in units of `I_k / D^2`:
+/// the remainder from degree 3 (harmonic norms for degrees 3 to 5, the tail
+/// from degree 6; see [`Lambert`]) and the rounding slack, for
+/// `(1/D, sigma = R/D, D/(D - R))` and the (widened) `|c0|`, `nu^2` and
+/// `hperp / D`.
+#[inline]
+fn series_width(
+    node: &Node,
+    (inv_d, sigma, inv_rho): (f64, f64, f64),
+    (ac, nu2, hperp): (f64, f64, f64),
+) -> DVec3 {
     let o = node.channel_offsets.map(|v| v.as_dvec3());
     let offset_lens = DVec3::new(
         o[0].abs().element_sum(),
         o[1].abs().element_sum(),
         o[2].abs().element_sum(),
     ) * inv_d;
-    let mu2 = node.mean_squared_radii() * inv_d2;
-    let ac = view.cosine.min(1.0) + SERIES_SLACK;
-    let hperp = (view.height + (view.tilt + ac + SERIES_SLACK) * radius) * inv_d;
+    let mu2 = node.mean_squared_radii() * (inv_d * inv_d);
+    let c2 = ac * ac;
     let mut remainder = DVec3::ZERO;
+    // mu_(m-1) <= sigma^(m-3) mu_2 and sigma^m, from m = 3.
     let mut mu_prev = mu2;
     let mut sigma_m = sigma * sigma * sigma;
     for (d, q) in node.harmonic_norms.iter().enumerate() {
         let m = (d + 3) as f64;
         let q = q.as_dvec3() * sigma_m;
-        let harmonic = (ac * ac * (m + 1.0) * (m + 1.0) + 0.5 * m * (m + 1.0)).sqrt();
+        let harmonic = (c2 * (m + 1.0) * (m + 1.0) + nu2 * (0.5 * m * (m + 1.0))).sqrt();
         let across = q * (ac * (m + 1.0)) + mu_prev * (hperp * 0.5 * m * (m + 1.0));
         remainder += (q * harmonic).min(across);
         mu_prev *= sigma;
         sigma_m *= sigma;
     }
+    // Tail from degree 6: mu_5 = mu_prev, mu_6 <= sigma mu_5.
     let mu6 = mu_prev * sigma;
     let (g1, g2) = tail_sums(sigma, inv_rho);
     let tail = mu6 * g1;
     remainder += tail.min(tail * ac + mu_prev * (hperp * g2));
+
     let remainder = remainder * (1.0 + SERIES_SLACK * inv_rho);
     let sums = f64::from(node.light_count) * f64::EPSILON * sigma * (1.0 + 18.0 * sigma);
     let slack = SERIES_SLACK * (1.0 + offset_lens + mu2)

@@ -848,17 +848,8 @@ impl<S: Shader> Shading<'_, S> {
         }
         let order = morton_order(queries);
         for chunk in group_runs(queries, &order).chunks(CHUNK_RUNS) {
-            self.scratch.batch.alone_cost = 0.0;
-            for run in chunk {
-                self.shade_members(
-                    queries,
-                    &order[run.clone()],
-                    threshold,
-                    &mut visibility,
-                    &mut |i, r| results[i] = r,
-                    &mut stats,
-                )?;
-            }
+            let (points, write) = ((queries, order.as_slice()), &mut |i, r| results[i] = r);
+            self.shade_chunk(points, chunk, threshold, &mut visibility, write, &mut stats)?;
         }
         Ok(stats)
     }
@@ -919,19 +910,16 @@ impl<S: Shader> Shading<'_, S> {
             .par_chunks(CHUNK_RUNS)
             .map(|runs| {
                 let mut shading = session();
-                let mut visibility = visibility.clone();
                 let mut out = Vec::new();
                 let mut stats = BatchStats::default();
-                for run in runs {
-                    shading.shade_members(
-                        queries,
-                        &order[run.clone()],
-                        threshold,
-                        &mut visibility,
-                        &mut |i, r| out.push((i as u32, r)),
-                        &mut stats,
-                    )?;
-                }
+                shading.shade_chunk(
+                    (queries, order.as_slice()),
+                    runs,
+                    threshold,
+                    &mut visibility.clone(),
+                    &mut |i, r| out.push((i as u32, r)),
+                    &mut stats,
+                )?;
                 Ok((out, stats))
             })
             .collect::<Result<_, ShadeError>>()?;
@@ -943,6 +931,29 @@ impl<S: Shader> Shading<'_, S> {
             }
         }
         Ok(stats)
+    }
+
+    /// Shades the groups `runs` (ranges of `order`, indices into `queries`),
+    /// one chunk: the estimate of what a point costs alone starts afresh, so
+    /// a chunk gives the same results whichever thread shades it.
+    fn shade_chunk<M, V: Visibility>(
+        &mut self,
+        (queries, order): (&[Query<M>], &[u32]),
+        runs: &[Range<usize>],
+        threshold: Threshold,
+        visibility: &mut V,
+        write: &mut impl FnMut(usize, ShadeResult),
+        stats: &mut BatchStats,
+    ) -> Result<(), ShadeError>
+    where
+        S: Accepts<M>,
+    {
+        self.scratch.batch.alone_cost = 0.0;
+        for run in runs {
+            let members = &order[run.clone()];
+            self.shade_members(queries, members, threshold, visibility, write, stats)?;
+        }
+        Ok(())
     }
 
     /// Whether a batch call with this threshold and visibility shares cuts.
