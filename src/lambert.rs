@@ -559,11 +559,13 @@ pub(crate) struct SharedView {
 }
 
 /// The width of the series interval shared by every shading point of a
-/// group that sees every member of `node` strictly above its tangent plane,
-/// per channel in units of `I_k / D^2` (`D` the group's nearest distance,
-/// [`SharedView`]): for each such point `p`, the node's exact sum lies
-/// within that width times `I_k kd_k / D^2` of
-/// `I_k kd_k / D_p^2 * degree_two(..)` at `p`.
+/// group, per channel in units of `I_k / D^2` (`D` the group's nearest
+/// distance, [`SharedView`]): for each point `p`, the smooth sum (`g`
+/// unclamped) over the members of `node` lies within that width times
+/// `I_k kd_k / D^2` of `I_k kd_k / D_p^2 * degree_two(..)` at `p`; where
+/// members lie below `p`'s tangent plane the exact sum exceeds the smooth
+/// one by at most the clamp term of [`Lambert`]'s docs, which the caller
+/// adds.
 ///
 /// Why it holds: the width of [`Lambert::series`] at `p` is a sum of terms
 /// that grow as `D_p` falls (`sigma = R / D_p`, `|o_k| / D_p`,
@@ -572,8 +574,7 @@ pub(crate) struct SharedView {
 /// `|c0|` and `hperp`; `A_m^2 = c0^2 (m+1)^2 + nu^2 m (m+1) / 2` with
 /// `nu <= 1`; `|nperp . y| <= |n . y| + |c0| |uh . y|`,
 /// `|n . y| <= |n0 . y| + |n - n0| |y|` and `|y| <= R` give
-/// `hperp <= height + (tilt + |c0|) R`; the clamp term vanishes with every
-/// member above the plane; and `I_k / D_p^2 <= I_k / D^2`.
+/// `hperp <= height + (tilt + |c0|) R`; and `I_k / D_p^2 <= I_k / D^2`.
 pub(crate) fn shared_width(node: &Node, view: &SharedView) -> DVec3 {
     let inv_d = view.inv_nearest;
     let radius = f64::from(node.radius);
