@@ -41,7 +41,7 @@ use manylights::{BatchStats, Lambert, LightTree, Query, ShadeResult, Threshold, 
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::compare::{max_ratio, placeholder, timed};
+use crate::compare::{max_ratio, timed};
 use crate::config::{SEED, SOA_TOLERANCE};
 use crate::exact::SoaLights;
 use crate::image::{exposure, write_comparison, write_radiance};
@@ -301,7 +301,7 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
         single.iter().map(|r| f64::from(r.cost())).sum::<f64>() / single.len() as f64;
 
     // The sweep.
-    let mut results = vec![placeholder(&mut shading, &queries[0])?; queries.len()];
+    let mut results = vec![ShadeResult::default(); queries.len()];
     let mut rows = Vec::new();
     let mut headline_image = Vec::new();
     for t in THRESHOLDS {
@@ -537,8 +537,7 @@ fn write_images(
         .map(|&p| Query::new(p, Vec3::Z))
         .collect::<Result<_, _>>()?;
     let mut shading = tree.shading(Lambert::new(Vec3::ONE));
-    let mut small_results =
-        vec![placeholder(&mut shading, &small_queries[0])?; small_queries.len()];
+    let mut small_results = vec![ShadeResult::default(); small_queries.len()];
     shading.shade_batch(
         &small_queries,
         Threshold::relative(HEADLINE),
@@ -602,7 +601,7 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
         .map(|q| tree.shading(shader).exact_query(q, Unoccluded))
         .collect();
     let mut shading = tree.shading(shader);
-    let mut results = vec![placeholder(&mut shading, &queries[0])?; queries.len()];
+    let mut results = vec![ShadeResult::default(); queries.len()];
     let discrete = Threshold::relative(HEADLINE);
     let configurations = [
         ("shade_batch", false),

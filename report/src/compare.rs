@@ -5,7 +5,7 @@ use std::error::Error;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
-use manylights::{Accepts, Query, ShadeError, ShadeResult, Shading, Threshold, Unoccluded};
+use manylights::{ShadeError, ShadeResult};
 use rayon::prelude::*;
 
 /// Runs `f` and returns its value with the wall time it took.
@@ -28,17 +28,6 @@ pub fn shade_pixels<H: Sync, S, T: Send>(
             hit.as_ref().map(|h| shade(s, h)).transpose()
         })
         .collect()
-}
-
-/// A result to fill the output slice of
-/// [`Shading::shade_batch`] with before the call: the root alone (budget 1)
-/// at `query`.
-pub fn placeholder<S: Accepts<M>, M>(
-    shading: &mut Shading<'_, S>,
-    query: &Query<M>,
-) -> Result<ShadeResult, ShadeError> {
-    let root_only = Threshold::absolute(f64::INFINITY).with_budget(1);
-    shading.shade_query(query, root_only, Unoccluded)
 }
 
 /// How the tree's image compares with the exact one, over the pixels whose

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use crate::bvh::entry_normal;
 use crate::camera::Camera;
-use crate::compare::{ErrorStats, placeholder, print_row, shade_pixels, timed};
+use crate::compare::{ErrorStats, print_row, shade_pixels, timed};
 use crate::image::write_comparison;
 use crate::options::Options;
 use crate::scenes::{City, GROUND_ALBEDO};
@@ -215,10 +215,10 @@ impl CityView {
                         Query::new(hit.point, hit.normal)
                     })
                     .collect::<Result<Vec<_>, _>>()?;
-                let Some(first) = queries.first() else {
+                if queries.is_empty() {
                     return Ok((Vec::new(), BatchStats::default(), [0; 4]));
-                };
-                let mut results = vec![placeholder(s, first)?; queries.len()];
+                }
+                let mut results = vec![ShadeResult::default(); queries.len()];
                 if !shadows {
                     let stats = s.shade_batch(&queries, threshold, Unoccluded, &mut results)?;
                     return Ok((results, stats, [0; 4]));

@@ -39,16 +39,25 @@ pub struct ShadeResult {
     pub stop: Stop,
 }
 
+/// Nothing shaded yet, to fill a results slice before a batch call
+/// ([`Shading::shade_batch`](crate::Shading::shade_batch)): radiance 0 with
+/// an infinite bound (it certifies nothing), no work, stopped by the budget.
+impl Default for ShadeResult {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
 impl ShadeResult {
-    /// Nothing shaded yet: a placeholder for scratch space.
+    /// [`ShadeResult::default`].
     pub(crate) const EMPTY: Self = Self {
         radiance: DVec3::ZERO,
-        error_bound: DVec3::ZERO,
+        error_bound: DVec3::INFINITY,
         nodes_evaluated: 0,
         lights_evaluated: 0,
         classify_queries: 0,
         point_queries: 0,
-        stop: Stop::ThresholdMet,
+        stop: Stop::Budget,
     };
 
     /// Relative rounding allowance of the certified-bound contract:
