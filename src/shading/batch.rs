@@ -226,8 +226,10 @@ enum Side {
 /// target: at most [`SAMPLES`] spread along the group's Morton order.
 #[derive(Clone, Copy, Debug)]
 struct Samples {
-    points: [DVec3; SAMPLES],
-    normals: [DVec3; SAMPLES],
+    /// Points and unit normals, by coordinate (so that the four samples'
+    /// values are computed side by side).
+    points: [[f64; SAMPLES]; 3],
+    normals: [[f64; SAMPLES]; 3],
 }
 
 /// Points steering a shared cut.
@@ -238,8 +240,8 @@ impl Samples {
         let last = members.len() - 1;
         let pick = |k: usize| queries[members[k * last / (SAMPLES - 1)] as usize].surface();
         Self {
-            points: core::array::from_fn(|k| pick(k).point),
-            normals: core::array::from_fn(|k| pick(k).normal),
+            points: core::array::from_fn(|axis| core::array::from_fn(|k| pick(k).point[axis])),
+            normals: core::array::from_fn(|axis| core::array::from_fn(|k| pick(k).normal[axis])),
         }
     }
 
@@ -247,15 +249,21 @@ impl Samples {
     /// (`intensity` already times `kd`): an estimate good enough to steer.
     #[inline]
     fn values(&self, position: DVec3, intensity: DVec3) -> [DVec3; SAMPLES] {
-        core::array::from_fn(|k| {
-            let u = position - self.points[k];
-            let d2 = u.length_squared();
-            if d2 > 0.0 {
-                intensity * (self.normals[k].dot(u).max(0.0) / (d2 * d2.sqrt()))
-            } else {
-                DVec3::ZERO
-            }
-        })
+        let mut g = [0.0f64; SAMPLES];
+        for (k, g) in g.iter_mut().enumerate() {
+            let u = [
+                position.x - self.points[0][k],
+                position.y - self.points[1][k],
+                position.z - self.points[2][k],
+            ];
+            let d2 = u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
+            let height =
+                self.normals[0][k] * u[0] + self.normals[1][k] * u[1] + self.normals[2][k] * u[2];
+            // A light on a sample (d = 0) counts 0.
+            let value = height.max(0.0) / (d2 * d2.sqrt());
+            *g = if d2 > 0.0 { value } else { 0.0 };
+        }
+        g.map(|g| intensity * g)
     }
 }
 
