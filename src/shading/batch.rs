@@ -827,8 +827,8 @@ impl<S: Shader> Shading<'_, S> {
     /// [`shade_query`](Self::shade_query) for each.
     ///
     /// Speed: on a 10^6-light street city seen from above the streets, one
-    /// core, certified 1% per pixel, the batch call took 3.8 us per pixel,
-    /// 441 times less than a vectorized exact sum and 7.7 times less than
+    /// core, certified 1% per pixel, the batch call took about 4 us per
+    /// pixel, 441 times less than a vectorized exact sum and 8 to 10 times less than
     /// shading each pixel on its own (one run of `cargo run --release -p
     /// manylights-report -- batch`).
     ///
