@@ -797,14 +797,18 @@ impl<S: Shader> Shading<'_, S> {
     /// at the group's nearest distance to the node and largest cosine (valid
     /// for every point and normal of the group), plus the clamp term where
     /// members reach below some point's tangent plane; nodes whose ball
-    /// comes too near the group are refined, down to single lights. Each point then sums, at its own position and
-    /// normal, the cut's node estimates and single lights exactly; its
-    /// certified bound is the cut's summed error. The cut aims at the
-    /// target for a representative point with a margin; a point that still
-    /// misses its own target (a darker point under a relative threshold)
-    /// gets up to three further shared refinements and is then shaded on
-    /// its own, as is every point of a run too scattered for a shared cut
-    /// to pay (it is split in two first).
+    /// comes too near the group are refined, down to single lights. Each
+    /// point then sums, at its own position and normal, the cut's node
+    /// estimates and single lights; its certified bound is the cut's summed
+    /// error.
+    ///
+    /// A relative target is aimed at with the darkest of four points spread
+    /// over the run (virtual-light estimates, with a margin); a point that
+    /// still misses its own target gets up to three further shared
+    /// refinements and is then shaded on its own. A run whose shared cut
+    /// costs more than a share of what its points would cost alone (a
+    /// running estimate from the points shaded alone) is split in two, and
+    /// runs of fewer than four points are shaded point by point.
     ///
     /// A point's [`ShadeResult::nodes_evaluated`] then counts the node
     /// estimates it summed (cheaper than bounds) and
@@ -828,9 +832,9 @@ impl<S: Shader> Shading<'_, S> {
     ///
     /// Speed: on a 10^6-light street city seen from above the streets, one
     /// core, certified 1% per pixel, the batch call took about 4 us per
-    /// pixel, 441 times less than a vectorized exact sum and 8 to 10 times less than
-    /// shading each pixel on its own (one run of `cargo run --release -p
-    /// manylights-report -- batch`).
+    /// pixel, 441 times less than a vectorized exact sum and 8 to 10 times
+    /// less than shading each pixel on its own (`cargo run --release -p
+    /// manylights-report -- batch`, two runs).
     ///
     /// Allocation: a call allocates its Morton order and group list (linear
     /// in the batch); the session's scratch space is reused across calls.
