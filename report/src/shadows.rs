@@ -160,41 +160,7 @@ impl<'o> Shadows<'o> {
     /// lifted here): see the type's documentation, "Classification".
     pub fn classify_box(&mut self, point: Vec3, target: &Aabb) -> Coverage {
         let apex = point + self.lift;
-        // Occluded: a box that blocks every segment from the apex to the
-        // target meets the segment to its centre; the first few boxes along
-        // that segment are tried.
-        let centre = 0.5 * (target.min + target.max);
-        let to_centre = Segment::new(apex, centre);
-        let mut to_corners: Option<[Segment; 8]> = None;
-        let (mut tried, mut occluded, mut centre_blocked) = (0, false, false);
-        self.occluders.any_along(apex, centre, |b| {
-            centre_blocked |= to_centre.hits(b);
-            let core = BvhAabb::new(b.min + MARGIN, b.max - MARGIN);
-            if !(core.valid() && to_centre.hits(&core)) {
-                return false;
-            }
-            tried += 1;
-            occluded = to_corners
-                .get_or_insert_with(|| corners(target).map(|c| Segment::new(apex, c)))
-                .iter()
-                .all(|s| s.hits(&core));
-            occluded || tried == OCCLUDER_CANDIDATES
-        });
-        if occluded {
-            return self.answer(Coverage::Occluded);
-        }
-        if centre_blocked {
-            // A box meets one of the segments, so the node is not visible.
-            return self.answer(Coverage::Partial);
-        }
-        // Visible: no box meets the shaft.
-        let shaft = Shaft::new(apex, target, MARGIN);
-        let meets = |b: &BvhAabb| shaft.meets(b);
-        self.answer(if self.occluders.any_in(meets, meets) {
-            Coverage::Partial
-        } else {
-            Coverage::Visible
-        })
+        self.classify_from(apex, &[apex], target, || Shaft::new(apex, target, MARGIN))
     }
 
     /// Classifies the box `target` as seen from every point of the box
@@ -211,36 +177,51 @@ impl<'o> Shadows<'o> {
             min: points.min + self.lift,
             max: points.max + self.lift,
         };
-        let (a, b) = (0.5 * (from.min + from.max), 0.5 * (target.min + target.max));
-        let between = Segment::new(a, b);
-        let mut segments: Option<Vec<Segment>> = None;
+        let centre = 0.5 * (from.min + from.max);
+        self.classify_from(centre, &corners(&from), target, || {
+            Shaft::between(&from, target, MARGIN)
+        })
+    }
+
+    /// The classification from the (lifted) points whose corners are
+    /// `starts` (`centre` among them or inside their box) to `target`.
+    /// Occluded: an occluder that blocks every segment from the starts to
+    /// the target meets the segment from `centre` to the target's centre;
+    /// the first few boxes along that segment are tried against the
+    /// segments between the starts and the target's corners. Visible: no
+    /// box meets `shaft()`.
+    fn classify_from(
+        &mut self,
+        centre: Vec3,
+        starts: &[Vec3],
+        target: &Aabb,
+        shaft: impl FnOnce() -> Shaft,
+    ) -> Coverage {
+        let middle = 0.5 * (target.min + target.max);
+        let between = Segment::new(centre, middle);
+        let ends = corners(target);
         let (mut tried, mut occluded, mut centre_blocked) = (0, false, false);
-        self.occluders.any_along(a, b, |o| {
+        self.occluders.any_along(centre, middle, |o| {
             centre_blocked |= between.hits(o);
             let core = BvhAabb::new(o.min + MARGIN, o.max - MARGIN);
             if !(core.valid() && between.hits(&core)) {
                 return false;
             }
             tried += 1;
-            occluded = segments
-                .get_or_insert_with(|| {
-                    let ends = corners(target);
-                    corners(&from)
-                        .iter()
-                        .flat_map(|&p| ends.map(|q| Segment::new(p, q)))
-                        .collect()
-                })
+            occluded = starts
                 .iter()
-                .all(|s| s.hits(&core));
+                .all(|&p| ends.iter().all(|&q| Segment::new(p, q).hits(&core)));
             occluded || tried == OCCLUDER_CANDIDATES
         });
         if occluded {
             return self.answer(Coverage::Occluded);
         }
         if centre_blocked {
+            // A box meets one of the segments, so the node is not visible.
             return self.answer(Coverage::Partial);
         }
-        let shaft = Shaft::between(&from, target, MARGIN);
+        // Visible: no box meets the shaft.
+        let shaft = shaft();
         let meets = |o: &BvhAabb| shaft.meets(o);
         self.answer(if self.occluders.any_in(meets, meets) {
             Coverage::Partial
