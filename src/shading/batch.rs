@@ -298,8 +298,12 @@ pub(crate) struct BatchScratch {
     weighted: Vec<(u32, f64)>,
     /// Each entry's values at the samples, by slot.
     steer: Vec<[DVec3; SAMPLES]>,
-    /// Each member's result in the current round.
+    /// Each member's result in the current round, and whether it missed
+    /// its target (to be shaded on its own).
     results: Vec<ShadeResult>,
+    alone: Vec<bool>,
+    /// Nodes a blend still has to refine: index, weight, known visible.
+    blending: Vec<(u32, f64, bool)>,
     /// Running estimate of what a point shaded alone costs (0: none yet).
     alone_cost: f64,
 }
@@ -600,7 +604,7 @@ impl<V: Visibility> SharedCut<'_, V> {
         let floor = level / band;
         let ramp = |key: f64| ((key - floor) / (level - floor)).clamp(0.0, 1.0);
         let mut error = DVec3::ZERO;
-        let mut stack: Vec<(u32, f64, bool)> = Vec::new();
+        scratch.blending.clear();
         scratch.weighted.clear();
         for (e, _) in scratch.list.waiting() {
             let alpha = ramp(e.key);
@@ -609,11 +613,13 @@ impl<V: Visibility> SharedCut<'_, V> {
                 error += e.error * (1.0 - alpha);
             }
             if alpha > 0.0 {
-                stack.push((e.node, alpha, e.seen == Seen::Visible));
+                scratch
+                    .blending
+                    .push((e.node, alpha, e.seen == Seen::Visible));
             }
         }
         let budget = self.points * self.budget_per_point;
-        while let Some((node, weight, visible)) = stack.pop() {
+        while let Some((node, weight, visible)) = scratch.blending.pop() {
             if self.evaluations > budget {
                 self.unblend(scratch, mark);
                 return None;
@@ -628,11 +634,11 @@ impl<V: Visibility> SharedCut<'_, V> {
                             error += child_error * (weight * (1.0 - alpha));
                         }
                         if alpha > 0.0 {
-                            stack.push((c, weight * alpha, true));
+                            scratch.blending.push((c, weight * alpha, true));
                         }
                     }
                     // No shared bound: refined fully.
-                    None => stack.push((c, weight, e.visible)),
+                    None => scratch.blending.push((c, weight, e.visible)),
                 }
             });
         }
@@ -1024,10 +1030,10 @@ impl<S: Shader> Shading<'_, S> {
             return self.shade_members(queries, rest, threshold, visibility, write, stats);
         }
         match self.shade_shared(queries, members, &threshold, visibility, stats) {
-            Ok(alone) => {
+            Ok(()) => {
                 for (k, &i) in members.iter().enumerate() {
                     let i = i as usize;
-                    if alone[k] {
+                    if self.scratch.batch.alone[k] {
                         write(
                             i,
                             self.shade_alone(&queries[i], threshold, &mut *visibility)?,
@@ -1070,7 +1076,7 @@ impl<S: Shader> Shading<'_, S> {
     }
 
     /// Picks a shared cut for `members` and shades them through it; fills
-    /// the scratch results and returns which members still need shading on
+    /// the scratch results and marks the members that still need shading on
     /// their own.
     fn shade_shared<M, V: Visibility>(
         &mut self,
@@ -1079,7 +1085,7 @@ impl<S: Shader> Shading<'_, S> {
         threshold: &Threshold,
         visibility: &mut V,
         stats: &mut BatchStats,
-    ) -> Result<Vec<bool>, TooCostly> {
+    ) -> Result<(), TooCostly> {
         let Some(kd) = self.shader.diffuse_albedo() else {
             return Err(TooCostly);
         };
@@ -1108,7 +1114,7 @@ impl<S: Shader> Shading<'_, S> {
         stats: &mut BatchStats,
         (kd, group, samples): (DVec3, Group, Samples),
         scratch: &mut BatchScratch,
-    ) -> Result<Vec<bool>, TooCostly> {
+    ) -> Result<(), TooCostly> {
         scratch.list.clear();
         scratch.steer.clear();
         scratch.lights.clear();
@@ -1135,7 +1141,8 @@ impl<S: Shader> Shading<'_, S> {
             cut.enter(scratch, 0, false);
         }
         let mut margin = FIRST_MARGIN;
-        let mut alone = vec![false; members.len()];
+        scratch.alone.clear();
+        scratch.alone.resize(members.len(), false);
         scratch.results.clear();
         scratch.results.resize(members.len(), ShadeResult::EMPTY);
         for round in 0..ROUNDS {
@@ -1197,8 +1204,9 @@ impl<S: Shader> Shading<'_, S> {
                     point_queries: rays,
                     stop: Stop::ThresholdMet,
                 };
-                alone[k] = !threshold.met(radiance, bound, largest);
-                if alone[k] {
+                let alone = !threshold.met(radiance, bound, largest);
+                scratch.alone[k] = alone;
+                if alone {
                     darkest = darkest.min(radiance.max_element());
                 }
             }
@@ -1218,11 +1226,11 @@ impl<S: Shader> Shading<'_, S> {
             }
             margin = next;
         }
-        let shared = alone.iter().filter(|a| !**a).count() as u32;
+        let shared = scratch.alone.iter().filter(|a| !**a).count() as u32;
         stats.groups += 1;
         stats.shared_points += shared;
         stats.points_alone += members.len() as u32 - shared;
-        Ok(alone)
+        Ok(())
     }
 
     /// One point's sum over the shared cut in `scratch`, clamped at 0 (the
