@@ -2,7 +2,6 @@
 //! with their running sums.
 
 use std::cmp::Ordering;
-use std::collections::BinaryHeap;
 
 use glam::DVec3;
 
@@ -88,43 +87,55 @@ impl Entry {
     }
 }
 
-/// What the heap orders: an entry's class and key, and where its record
-/// lies. Kept to 16 bytes so that sifting is cheap.
-#[derive(Clone, Copy, Debug)]
-struct Key {
-    key: f64,
-    slot: u32,
-    class: Class,
-}
+/// The key of a slot no longer waiting (keys are at least 0).
+const POPPED: f64 = -1.0;
 
-impl PartialEq for Key {
-    fn eq(&self, other: &Self) -> bool {
-        self.cmp(other) == Ordering::Equal
-    }
-}
-impl Eq for Key {}
-impl PartialOrd for Key {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl Ord for Key {
-    #[inline]
-    fn cmp(&self, other: &Self) -> Ordering {
-        self.class
-            .cmp(&other.class)
-            .then(self.key.total_cmp(&other.key))
-    }
-}
+/// No slot: the end of a bucket's list, an empty bucket.
+const NONE: u32 = u32::MAX;
 
-/// Unrefined nodes by decreasing (class, error), their records in a side
-/// vector, with running sums of their estimates and errors and counts of
-/// the nodes that must be refined whatever the error. Keeps its capacity
-/// across calls.
-#[derive(Debug, Default)]
+/// Buckets per octave of the key: the key's top four mantissa bits.
+const BUCKET_SHIFT: u32 = 48;
+/// Buckets in the window: 128 octaves. Keys above or below the window
+/// share its top or bottom bucket; the order stays exact (a bucket is
+/// searched for its largest key), only the search grows.
+const BUCKETS: usize = 2048;
+/// Room above the first ordinary key pushed after a clear (eight
+/// octaves): the root's error rarely grows in its children.
+const HEADROOM: usize = 8 * 16;
+
+/// Unrefined nodes by decreasing (class, error), with running sums of
+/// their estimates and errors and counts of the nodes that must be refined
+/// whatever the error. Keeps its capacity across calls.
+///
+/// A bucket queue: ordinary entries go to a bucket by the exponent and top
+/// four mantissa bits of their key (a 16th of an octave) and the
+/// largest entry is searched for in the highest non-empty bucket, so a pop
+/// costs a short scan instead of a heap's `log n` sifts of scattered
+/// records, and the order is exactly that of a heap, ties going to the entry pushed first. The few
+/// entries of the other classes wait in a list of their own, searched
+/// first.
+#[derive(Debug)]
 pub(crate) struct ErrorList {
-    heap: BinaryHeap<Key>,
     entries: Vec<Entry>,
+    /// Per slot: the key (scanned without touching the records) and the
+    /// next slot in its bucket.
+    keys: Vec<f64>,
+    next: Vec<u32>,
+    /// First slot of each bucket's list.
+    heads: Box<[u32]>,
+    /// Bucket of the smallest and the largest key bits seen since the
+    /// clear: `bucket = clamp(bits - base)`.
+    base: i64,
+    /// Buckets below `top` may be non-empty; none above.
+    top: usize,
+    /// The range of buckets touched since the last clear.
+    touched: (usize, usize),
+    /// Slots of the waiting entries of classes other than `Error`.
+    special: Vec<u32>,
+    /// The largest waiting entry, once searched for: (slot, the slot before
+    /// it in its bucket or `NONE`, its bucket or `NONE` for a special one).
+    best: Option<(u32, u32, usize)>,
+    waiting: usize,
     /// Running sums; they subtract and may drift, so a stop is confirmed
     /// with [`resum`](Self::resum).
     estimate: DVec3,
@@ -133,14 +144,62 @@ pub(crate) struct ErrorList {
     unbounded: u32,
 }
 
+impl Default for ErrorList {
+    fn default() -> Self {
+        Self {
+            entries: Vec::new(),
+            keys: Vec::new(),
+            next: Vec::new(),
+            heads: vec![NONE; BUCKETS].into_boxed_slice(),
+            base: 0,
+            top: 0,
+            touched: (BUCKETS, 0),
+            special: Vec::new(),
+            best: None,
+            waiting: 0,
+            estimate: DVec3::ZERO,
+            error: DVec3::ZERO,
+            over_contribution: 0,
+            unbounded: 0,
+        }
+    }
+}
+
+/// `(class, key)` ordering of two waiting entries.
+#[inline]
+fn above(a: &Entry, b: &Entry) -> bool {
+    match a.class.cmp(&b.class) {
+        Ordering::Equal => a.key.total_cmp(&b.key) == Ordering::Greater,
+        o => o == Ordering::Greater,
+    }
+}
+
 impl ErrorList {
     pub(crate) fn clear(&mut self) {
-        self.heap.clear();
+        let (lo, hi) = self.touched;
+        if lo <= hi {
+            self.heads[lo..=hi].fill(NONE);
+        }
+        self.touched = (BUCKETS, 0);
+        self.top = 0;
         self.entries.clear();
+        self.keys.clear();
+        self.next.clear();
+        self.special.clear();
+        self.best = None;
+        self.waiting = 0;
         self.estimate = DVec3::ZERO;
         self.error = DVec3::ZERO;
         self.over_contribution = 0;
         self.unbounded = 0;
+    }
+
+    /// The bucket of a non-negative key (NaN, which no entry carries, would
+    /// land in the top bucket).
+    #[inline]
+    fn bucket(&self, key: f64) -> usize {
+        let bits = (key.max(0.0).to_bits() >> BUCKET_SHIFT) as i64;
+        (bits - self.base).clamp(0, BUCKETS as i64 - 1) as usize
     }
 
     /// Adds an entry; returns its slot, the number of entries pushed
@@ -156,19 +215,86 @@ impl ErrorList {
         self.estimate += estimate;
         self.error += error;
         let slot = self.entries.len() as u32;
-        self.heap.push(Key {
-            key: e.key,
-            slot,
-            class: e.class,
-        });
         self.entries.push(e);
+        self.keys.push(e.key.max(0.0));
+        self.waiting += 1;
+        if e.class == Class::Error {
+            if self.touched.0 > self.touched.1 {
+                // The first ordinary key since the clear places the window.
+                let bits = (e.key.max(0.0).to_bits() >> BUCKET_SHIFT) as i64;
+                self.base = bits + HEADROOM as i64 - BUCKETS as i64 + 1;
+            }
+            let b = self.bucket(e.key);
+            self.next.push(self.heads[b]);
+            self.heads[b] = slot;
+            self.top = self.top.max(b);
+            self.touched = (self.touched.0.min(b), self.touched.1.max(b));
+            // A new entry at the head of the best one's bucket changes the
+            // slot before it; one in a higher bucket may be the new best.
+            if let Some((_, _, best_bucket)) = self.best
+                && best_bucket != NONE as usize
+                && b >= best_bucket
+            {
+                self.best = None;
+            }
+        } else {
+            self.next.push(NONE);
+            self.special.push(slot);
+            self.best = None;
+        }
         slot
+    }
+
+    /// Finds (and remembers) the largest waiting entry.
+    #[inline]
+    fn find_best(&mut self) -> Option<(u32, u32, usize)> {
+        if self.best.is_some() {
+            return self.best;
+        }
+        if let Some((i, &slot)) = self
+            .special
+            .iter()
+            .enumerate()
+            .reduce(|a, b| {
+                if above(&self.entries[*b.1 as usize], &self.entries[*a.1 as usize]) {
+                    b
+                } else {
+                    a
+                }
+            })
+        {
+            self.best = Some((slot, i as u32, NONE as usize));
+            return self.best;
+        }
+        if self.waiting == 0 {
+            return None;
+        }
+        while self.heads[self.top] == NONE {
+            self.top -= 1;
+        }
+        let mut slot = self.heads[self.top];
+        let (mut best, mut best_prev, mut best_key) = (slot, NONE, self.keys[slot as usize]);
+        loop {
+            let next = self.next[slot as usize];
+            if next == NONE {
+                break;
+            }
+            let prev = slot;
+            slot = next;
+            let key = self.keys[slot as usize];
+            if key >= best_key {
+                (best, best_prev, best_key) = (slot, prev, key);
+            }
+        }
+        self.best = Some((best, best_prev, self.top));
+        self.best
     }
 
     /// The entry that would be refined next.
     #[inline]
-    pub(crate) fn peek(&self) -> Option<&Entry> {
-        self.heap.peek().map(|k| &self.entries[k.slot as usize])
+    pub(crate) fn peek(&mut self) -> Option<&Entry> {
+        let (slot, _, _) = self.find_best()?;
+        Some(&self.entries[slot as usize])
     }
 
     #[inline]
@@ -179,7 +305,21 @@ impl ErrorList {
     /// [`pop`](Self::pop), with the entry's slot.
     #[inline]
     pub(crate) fn pop_slot(&mut self) -> Option<(Entry, u32)> {
-        let slot = self.heap.pop()?.slot;
+        let (slot, prev, bucket) = self.find_best()?;
+        self.best = None;
+        if bucket == NONE as usize {
+            // `prev` holds the index in the special list.
+            self.special.swap_remove(prev as usize);
+        } else {
+            let next = self.next[slot as usize];
+            if prev == NONE {
+                self.heads[bucket] = next;
+            } else {
+                self.next[prev as usize] = next;
+            }
+        }
+        self.waiting -= 1;
+        self.keys[slot as usize] = POPPED;
         let e = self.entries[slot as usize];
         match e.class {
             Class::Unbounded => self.unbounded -= 1,
@@ -194,7 +334,7 @@ impl ErrorList {
 
     /// The largest error waiting (0 when empty).
     #[inline]
-    pub(crate) fn largest(&self) -> f64 {
+    pub(crate) fn largest(&mut self) -> f64 {
         self.peek().map_or(0.0, |e| e.key)
     }
 
@@ -221,8 +361,8 @@ impl ErrorList {
     pub(crate) fn resum(&mut self) -> (DVec3, DVec3) {
         let mut estimate = CompensatedSum::default();
         let mut error = CompensatedSum::default();
-        for k in &self.heap {
-            let (e, r) = self.entries[k.slot as usize].counted();
+        for (e, _) in self.waiting() {
+            let (e, r) = e.counted();
             estimate.add(e);
             error.add(r);
         }
@@ -232,19 +372,49 @@ impl ErrorList {
 
     /// Number of waiting entries.
     pub(crate) fn len(&self) -> usize {
-        self.heap.len()
+        self.waiting
     }
 
-    /// The waiting entries with their slots, in no particular order.
+    /// The waiting entries with their slots, in the order they were pushed.
     pub(crate) fn waiting(&self) -> impl Iterator<Item = (&Entry, u32)> + '_ {
-        self.heap
+        self.entries
             .iter()
-            .map(|k| (&self.entries[k.slot as usize], k.slot))
+            .zip(&self.keys)
+            .enumerate()
+            .filter(|(_, (_, key))| **key >= 0.0)
+            .map(|(s, (e, _))| (e, s as u32))
     }
 
-    /// Removes every waiting entry, in no particular order.
-    pub(crate) fn drain(&mut self) -> impl Iterator<Item = Entry> + '_ {
-        let entries = &self.entries;
-        self.heap.drain().map(|k| entries[k.slot as usize])
+    /// Removes every waiting entry, in the order they were pushed.
+    pub(crate) fn drain(&mut self) -> Drain<'_> {
+        Drain { list: self, slot: 0 }
+    }
+}
+
+/// The iterator of [`ErrorList::drain`]; the list is empty once it is
+/// dropped.
+pub(crate) struct Drain<'a> {
+    list: &'a mut ErrorList,
+    slot: usize,
+}
+
+impl Iterator for Drain<'_> {
+    type Item = Entry;
+
+    fn next(&mut self) -> Option<Entry> {
+        let list = &*self.list;
+        while let Some(&key) = list.keys.get(self.slot) {
+            self.slot += 1;
+            if key >= 0.0 {
+                return Some(list.entries[self.slot - 1]);
+            }
+        }
+        None
+    }
+}
+
+impl Drop for Drain<'_> {
+    fn drop(&mut self) {
+        self.list.clear();
     }
 }
