@@ -141,6 +141,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             }
             list.pop();
             if refining {
+                // The next node to refine is probably the one waiting on top
+                // now: its children load while this one's are evaluated.
+                if let Some(next) = list.peek() {
+                    self.tree.prefetch_refinement(next.node as usize);
+                }
                 let visible = top.seen == Seen::Visible;
                 self.refine(&node, visible, 1.0, |e| {
                     list.push(e);

@@ -232,3 +232,58 @@ impl fmt::Debug for LightTree {
             .finish_non_exhaustive()
     }
 }
+
+impl LightTree {
+    /// Asks the processor to start loading what refining node `index` will
+    /// read (its children's records, or its lights): issued for the node the
+    /// cut will probably refine next while it evaluates the current one, so
+    /// that the loads overlap the work instead of stalling it.
+    #[inline]
+    pub(crate) fn prefetch_refinement(&self, index: usize) {
+        let Some(node) = self.nodes.get(index) else {
+            return;
+        };
+        let bytes = if node.is_leaf() {
+            let lights = self.lights.get(node.lights()).unwrap_or(&[]);
+            as_bytes_range(lights)
+        } else {
+            as_bytes_range(self.nodes.get(node.children()).unwrap_or(&[]))
+        };
+        prefetch(bytes);
+    }
+}
+
+/// The address range of a slice.
+#[inline]
+fn as_bytes_range<T>(items: &[T]) -> core::ops::Range<usize> {
+    let start = items.as_ptr() as usize;
+    start..start + core::mem::size_of_val(items)
+}
+
+/// Cache lines prefetched at most per call.
+const PREFETCH_LINES: usize = 16;
+
+/// Prefetches the cache lines of an address range (at most
+/// [`PREFETCH_LINES`] of them) into every cache level. A hint only: it
+/// reads no memory the program can observe and never faults.
+#[inline]
+fn prefetch(range: core::ops::Range<usize>) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let mut line = range.start & !63;
+        let end = range.end.min(range.start + PREFETCH_LINES * 64);
+        while line < end {
+            // SAFETY: `prefetch` is a hint that never dereferences the
+            // address architecturally and cannot fault; every address here
+            // lies inside a live slice anyway.
+            #[allow(unsafe_code)]
+            unsafe {
+                _mm_prefetch::<_MM_HINT_T0>(line as *const i8);
+            }
+            line += 64;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = range;
+}
