@@ -717,6 +717,9 @@ impl<V: Visibility> SharedCut<'_, V> {
             if cost > self.points * self.budget_per_point || entries > MAX_CUT_ITEMS {
                 return Err(TooCostly);
             }
+            if let Some(next) = scratch.list.peek() {
+                self.tree.prefetch_refinement(next.node as usize);
+            }
             let visible = top.seen == Seen::Visible;
             self.refine(scratch, top.node, visible, 1.0, |cut, scratch, c, e| {
                 cut.push(scratch, c, e);

@@ -140,6 +140,9 @@ pub(crate) struct ErrorList {
     /// with [`resum`](Self::resum).
     estimate: DVec3,
     error: DVec3,
+    /// Whether the sums are those of the last [`resum`](Self::resum), with
+    /// no push or pop since.
+    fresh: bool,
     over_contribution: u32,
     unbounded: u32,
 }
@@ -159,6 +162,7 @@ impl Default for ErrorList {
             waiting: 0,
             estimate: DVec3::ZERO,
             error: DVec3::ZERO,
+            fresh: true,
             over_contribution: 0,
             unbounded: 0,
         }
@@ -190,6 +194,7 @@ impl ErrorList {
         self.waiting = 0;
         self.estimate = DVec3::ZERO;
         self.error = DVec3::ZERO;
+        self.fresh = true;
         self.over_contribution = 0;
         self.unbounded = 0;
     }
@@ -214,6 +219,7 @@ impl ErrorList {
         let (estimate, error) = e.counted();
         self.estimate += estimate;
         self.error += error;
+        self.fresh = false;
         let slot = self.entries.len() as u32;
         self.entries.push(e);
         self.keys.push(e.key.max(0.0));
@@ -329,6 +335,7 @@ impl ErrorList {
         let (estimate, error) = e.counted();
         self.estimate -= estimate;
         self.error -= error;
+        self.fresh = false;
         Some((e, slot))
     }
 
@@ -357,8 +364,12 @@ impl ErrorList {
     }
 
     /// Recomputes the sums from scratch with compensated summation, replaces
-    /// the running ones with them and returns them.
+    /// the running ones with them and returns them (at once if nothing was
+    /// pushed or popped since the last time).
     pub(crate) fn resum(&mut self) -> (DVec3, DVec3) {
+        if self.fresh {
+            return (self.estimate, self.error);
+        }
         let mut estimate = CompensatedSum::default();
         let mut error = CompensatedSum::default();
         for (e, _) in self.waiting() {
@@ -367,6 +378,7 @@ impl ErrorList {
             error.add(r);
         }
         (self.estimate, self.error) = (estimate.value(), error.value());
+        self.fresh = true;
         (self.estimate, self.error)
     }
 
