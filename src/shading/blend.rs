@@ -80,7 +80,7 @@ pub(crate) fn blend<S: Shader, V: Visibility>(
     }
     while let Some(p) = stack.pop() {
         let node = cut.tree.nodes[p.node as usize];
-        if !cut.can_refine(&node) {
+        if !cut.can_refine(&node, p.visible) {
             return None;
         }
         cut.refine(&node, p.visible, p.weight, |e| settle(e, p.weight, stack));

@@ -257,18 +257,13 @@ impl ErrorList {
         if self.best.is_some() {
             return self.best;
         }
-        if let Some((i, &slot)) = self
-            .special
-            .iter()
-            .enumerate()
-            .reduce(|a, b| {
-                if above(&self.entries[*b.1 as usize], &self.entries[*a.1 as usize]) {
-                    b
-                } else {
-                    a
-                }
-            })
-        {
+        if let Some((i, &slot)) = self.special.iter().enumerate().reduce(|a, b| {
+            if above(&self.entries[*b.1 as usize], &self.entries[*a.1 as usize]) {
+                b
+            } else {
+                a
+            }
+        }) {
             self.best = Some((slot, i as u32, NONE as usize));
             return self.best;
         }
@@ -399,7 +394,10 @@ impl ErrorList {
 
     /// Removes every waiting entry, in the order they were pushed.
     pub(crate) fn drain(&mut self) -> Drain<'_> {
-        Drain { list: self, slot: 0 }
+        Drain {
+            list: self,
+            slot: 0,
+        }
     }
 }
 

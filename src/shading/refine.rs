@@ -24,6 +24,9 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     pub(crate) point: Vec3,
     pub(crate) max_contribution: Option<f64>,
     pub(crate) budget: u32,
+    /// Largest visible node summed light by light instead of bounded: 0
+    /// with interpolation, whose blend ramps through bounded nodes.
+    exact_lights: u32,
     pub(crate) visibility: V,
     /// Exact leaves and nodes that need no refinement.
     pub(crate) settled: CompensatedSum,
@@ -64,6 +67,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             point,
             max_contribution: threshold.max_contribution(),
             budget: threshold.budget().unwrap_or(u32::MAX).max(1),
+            exact_lights: if threshold.interpolation().is_some() {
+                0
+            } else {
+                EXACT_NODE_LIGHTS
+            },
             visibility,
             settled: CompensatedSum::default(),
             nodes: 0,
@@ -82,11 +90,24 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     }
 
     /// Whether refining `node` (its children or its lights) fits in the
-    /// budget.
+    /// budget, `visible` saying whether the node is known visible (its
+    /// small children are then summed light by light, see
+    /// [`EXACT_NODE_LIGHTS`]).
     #[inline]
-    pub(crate) fn can_refine(&self, node: &Node) -> bool {
+    pub(crate) fn can_refine(&self, node: &Node, visible: bool) -> bool {
         let cost = if node.is_leaf() {
             node.light_count
+        } else if visible || V::ALWAYS_VISIBLE {
+            self.tree.nodes[node.children()]
+                .iter()
+                .map(|c| {
+                    if c.radius != 0.0 && c.light_count <= self.exact_lights {
+                        c.light_count
+                    } else {
+                        1
+                    }
+                })
+                .sum()
         } else {
             node.child_count
         };
@@ -124,7 +145,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             };
             let node = self.tree.nodes[top.node as usize];
             let refining = top.seen != Seen::Unknown || self.gave_up_classifying();
-            if refining && !self.can_refine(&node) {
+            if refining && !self.can_refine(&node, top.seen == Seen::Visible) {
                 outcome.stop = Stop::Budget;
                 break;
             }
@@ -328,14 +349,32 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 self.exact_light(l.position, l.intensity.as_dvec3(), seen, weight);
             }
         } else {
+            let known = visible || V::ALWAYS_VISIBLE;
             for child in node.children() {
-                if let Some(entry) = self.evaluate(child, visible, weight) {
+                let c = &self.tree.nodes[child];
+                if known && c.radius != 0.0 && c.light_count <= self.exact_lights {
+                    // Summing a few visible lights costs less than bounding
+                    // them (the budget counted them in `can_refine`).
+                    for k in c.lights() {
+                        let l = self.tree.lights[k];
+                        self.exact_light(l.position, l.intensity.as_dvec3(), Seen::Visible, weight);
+                    }
+                } else if let Some(entry) = self.evaluate(child, visible, weight) {
                     pending(entry);
                 }
             }
         }
     }
 }
+
+/// Nodes of at most this many lights, known visible, are summed light by
+/// light when they enter the cut instead of bounded (without interpolation
+/// across levels, whose blend needs the bounded nodes to ramp through): a node bound costs
+/// about as much as evaluating 10 to 20 lights exactly, and an exact sum
+/// leaves no error to refine later. Measured on the street city at a
+/// certified 1%: 1.5x faster per point at 100 and 1,000 lights, 1.3x at
+/// 10^4 and 1.15x at 10^6 (8 and 32 do about as well).
+pub(crate) const EXACT_NODE_LIGHTS: u32 = 16;
 
 /// Partial answers for small nodes before the cut may judge classification
 /// useless (see [`Cut::gave_up_classifying`]).
