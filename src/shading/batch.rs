@@ -72,6 +72,9 @@ const CHUNK_RUNS: usize = 16;
 /// Entries a point sums over a shared cut in the time of one shared node
 /// bound (measured: about 50 instructions an entry, 1,500 a bound).
 const ENTRIES_PER_BOUND: u64 = 32;
+/// Lights a point shaded alone evaluates exactly in the time of one node
+/// bound, in the estimate of what a point costs alone.
+const LIGHTS_PER_BOUND: f64 = 4.0;
 /// Most entries in a shared cut: the lanes' sums are certified up to
 /// `2^16` terms (see `packed_bound`).
 const MAX_CUT_ITEMS: usize = 1 << 15;
@@ -1068,7 +1071,11 @@ impl<S: Shader> Shading<'_, S> {
         S: Accepts<M>,
     {
         let r = self.shade_query(query, threshold, visibility)?;
-        let cost = f64::from(r.cost()) + f64::from(r.classify_queries) + f64::from(r.point_queries);
+        // Lights summed exactly cost a fraction of a node bound each.
+        let cost = f64::from(r.nodes_evaluated)
+            + f64::from(r.lights_evaluated) / LIGHTS_PER_BOUND
+            + f64::from(r.classify_queries)
+            + f64::from(r.point_queries);
         let estimate = &mut self.scratch.batch.alone_cost;
         *estimate = if *estimate == 0.0 {
             cost.max(1.0)

@@ -99,7 +99,8 @@ impl Packed {
     ///
     /// Every entry must lie farther from `point` than its radius (the shared
     /// cut guarantees it), so `D > 0`.
-    // The crate's only unsafe code: calling the copies compiled for wider
+    // One of the crate's two unsafe blocks (the other is the prefetch hint
+    // in `tree::layout`): calling the copies compiled for wider
     // vectors once the processor is known to have them.
     #[allow(unsafe_code)]
     pub(crate) fn sum(&self, point: DVec3, normal: DVec3) -> DVec3 {
