@@ -101,7 +101,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             self.tree.nodes[node.children()]
                 .iter()
                 .map(|c| {
-                    if c.radius != 0.0 && c.light_count <= self.exact_lights {
+                    if self.sums_exactly(c) {
                         c.light_count
                     } else {
                         1
@@ -327,6 +327,23 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         self.settled.add(value * weight);
     }
 
+    /// Whether a visible node is summed light by light when it enters the
+    /// cut instead of bounded (see [`EXACT_NODE_LIGHTS`]).
+    #[inline]
+    fn sums_exactly(&self, node: &Node) -> bool {
+        node.radius != 0.0 && node.light_count <= self.exact_lights
+    }
+
+    /// Each light of `range` (leaf order) exactly, see
+    /// [`exact_light`](Self::exact_light).
+    #[inline]
+    fn sum_lights(&mut self, range: core::ops::Range<usize>, seen: Seen, weight: f64) {
+        for k in range {
+            let l = self.tree.lights[k];
+            self.exact_light(l.position, l.intensity.as_dvec3(), seen, weight);
+        }
+    }
+
     /// Refines `node`: its lights exactly if it is a leaf, its children
     /// otherwise, each with blend weight `weight`; entries that stay in the
     /// cut are passed to `pending`.
@@ -344,21 +361,15 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             } else {
                 Seen::Unknown
             };
-            for k in node.lights() {
-                let l = self.tree.lights[k];
-                self.exact_light(l.position, l.intensity.as_dvec3(), seen, weight);
-            }
+            self.sum_lights(node.lights(), seen, weight);
         } else {
             let known = visible || V::ALWAYS_VISIBLE;
             for child in node.children() {
                 let c = &self.tree.nodes[child];
-                if known && c.radius != 0.0 && c.light_count <= self.exact_lights {
+                if known && self.sums_exactly(c) {
                     // Summing a few visible lights costs less than bounding
                     // them (the budget counted them in `can_refine`).
-                    for k in c.lights() {
-                        let l = self.tree.lights[k];
-                        self.exact_light(l.position, l.intensity.as_dvec3(), Seen::Visible, weight);
-                    }
+                    self.sum_lights(c.lights(), Seen::Visible, weight);
                 } else if let Some(entry) = self.evaluate(child, visible, weight) {
                     pending(entry);
                 }
