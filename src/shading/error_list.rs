@@ -123,10 +123,11 @@ pub(crate) struct ErrorList {
     next: Vec<u32>,
     /// First slot of each bucket's list.
     heads: Box<[u32]>,
-    /// Bucket of the smallest and the largest key bits seen since the
-    /// clear: `bucket = clamp(bits - base)`.
+    /// Where the window starts: a key's bucket is `clamp(bits - base)`,
+    /// `bits` its exponent and top mantissa bits; set by the first ordinary
+    /// key since the clear.
     base: i64,
-    /// Buckets below `top` may be non-empty; none above.
+    /// Buckets up to `top` may be non-empty; none above.
     top: usize,
     /// The range of buckets touched since the last clear.
     touched: (usize, usize),
