@@ -4,9 +4,13 @@
 //! measures the largest jump of the relative error `(estimate - exact) /
 //! exact` between neighbouring shading points, with and without
 //! [`Threshold::with_interpolation`], at three thresholds, with the cost of
-//! each. Then renders the paper's pair (an image and its enhanced-contrast
-//! difference against the exact sum) from above, with and without
-//! interpolation.
+//! each. Then the same near the horizon: lights over a sphere, seen by
+//! panels in orbit whose tangent plane cuts through it, so that many nodes
+//! straddle the plane; there each scanline is sampled at two densities, so
+//! that real jumps (which do not shrink when the points are 10x closer) are
+//! told apart from the error's smooth variation (which does). Last, renders
+//! the paper's pair (an image and its enhanced-contrast difference against
+//! the exact sum) from above, with and without interpolation.
 //!
 //! ```text
 //! cargo run --release --example seams
@@ -21,7 +25,7 @@ use glam::{DVec3, Vec3};
 use manylights::{Lambert, LightTree, Shading, Threshold};
 use manylights_report::compare::timed;
 use manylights_report::image::{exposure, write_difference_linear, write_radiance};
-use manylights_report::scenes::{GRID_BLOCK, lamp_grid};
+use manylights_report::scenes::{GRID_BLOCK, SPHERE_RADIUS, lamp_grid, sphere_lights};
 use rayon::prelude::*;
 
 const BLOCKS: usize = 40;
@@ -47,19 +51,103 @@ const DIFF_FULL_SCALE: f64 = 0.02;
 /// Percentile of the exact image that the exposure maps to white.
 const EXPOSURE_PERCENTILE: f64 = 0.999;
 const ALBEDO: f32 = 0.7;
+/// Lights on the sphere of the horizon scanlines.
+const SPHERE_LIGHTS: usize = 20_000;
+/// Points along each horizon scanline: the coarse and the dense sampling.
+const HORIZON_POINTS: [usize; 2] = [10_000, 100_000];
+/// The horizon scanlines: name, ends, normal. Both run 300 units above the
+/// sphere's centre across its width; the plane through a point sweeps
+/// across the sphere with the point.
+const HORIZON: [(&str, Vec3, Vec3, Vec3); 2] = [
+    (
+        "sweeping",
+        Vec3::new(-0.9 * SPHERE_RADIUS, 10.0, 3.0 * SPHERE_RADIUS),
+        Vec3::new(0.9 * SPHERE_RADIUS, 10.0, 3.0 * SPHERE_RADIUS),
+        Vec3::X,
+    ),
+    (
+        "tilted",
+        Vec3::new(-1.5 * SPHERE_RADIUS, 10.0, 3.0 * SPHERE_RADIUS),
+        Vec3::new(1.5 * SPHERE_RADIUS, 10.0, 3.0 * SPHERE_RADIUS),
+        Vec3::new(1.0, 0.0, -0.5),
+    ),
+];
 
 /// The radiance at `points` (normal `+z`), in parallel: the tree at
 /// `threshold`, or the exact sum with `None`.
 fn shade(tree: &LightTree, points: &[Vec3], threshold: Option<Threshold>) -> Vec<DVec3> {
+    shade_facing(tree, points, Vec3::Z, threshold)
+}
+
+/// [`shade`] with the points facing `normal`.
+fn shade_facing(
+    tree: &LightTree,
+    points: &[Vec3],
+    normal: Vec3,
+    threshold: Option<Threshold>,
+) -> Vec<DVec3> {
     let session = || tree.shading(Lambert::new(Vec3::splat(ALBEDO)));
     let shade = |s: &mut Shading<'_, Lambert>, &p: &Vec3| match threshold {
-        Some(t) => s.shade(p, Vec3::Z, t).map(|r| r.radiance),
-        None => s.exact(p, Vec3::Z),
+        Some(t) => s.shade(p, normal, t).map(|r| r.radiance),
+        None => s.exact(p, normal),
     };
     let shaded = points.par_iter().map_init(session, shade);
     shaded
         .collect::<Result<_, _>>()
-        .expect("points on the ground are valid")
+        .expect("the scanlines' points and normals are valid")
+}
+
+/// The largest jump of the relative error (largest channel) between
+/// neighbours of a scanline.
+fn largest_jump(results: &[DVec3], exact: &[DVec3]) -> f64 {
+    let rel: Vec<f64> = results
+        .iter()
+        .zip(exact)
+        .map(|(r, e)| ((*r - *e) / *e).max_element())
+        .collect();
+    rel.windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .fold(0.0, f64::max)
+}
+
+/// `count` points evenly along the segment `a`-`b`.
+fn along(a: Vec3, b: Vec3, count: usize) -> Vec<Vec3> {
+    (0..count)
+        .map(|i| a.lerp(b, i as f32 / (count - 1) as f32))
+        .collect()
+}
+
+/// The horizon table: per scanline, threshold and density, the largest
+/// jump without and with interpolation.
+fn horizon(band: f64) -> Result<(), Box<dyn Error>> {
+    let tree = LightTree::build(&sphere_lights(SPHERE_LIGHTS, SEED))?;
+    println!(
+        "\nHorizon: {} lights over a sphere of radius {SPHERE_RADIUS}, panels {} units above its \
+         centre whose tangent plane cuts it; largest jump of the relative error\n",
+        tree.len(),
+        3.0 * SPHERE_RADIUS
+    );
+    println!("| scanline | threshold | points | interpolation off | on | smaller by |");
+    println!("|---|---|---|---|---|---|");
+    for (name, a, b, normal) in HORIZON {
+        let normal = normal.normalize();
+        for count in HORIZON_POINTS {
+            let points = along(a, b, count);
+            let exact = shade_facing(&tree, &points, normal, None);
+            for t in THRESHOLDS {
+                let discrete = Threshold::relative(t);
+                let [off, on] = [discrete, discrete.with_interpolation(band)].map(|th| {
+                    largest_jump(&shade_facing(&tree, &points, normal, Some(th)), &exact)
+                });
+                println!(
+                    "| {name} | {:.0}% | {count} | {off:.2e} | {on:.2e} | {:.1}x |",
+                    t * 100.0,
+                    off / on
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 /// One row of the table: the largest jump of the relative error between
@@ -71,17 +159,16 @@ fn scanline(tree: &LightTree, points: &[Vec3], exact: &[DVec3], t: Threshold) ->
         let shade = |&p: &Vec3| shading.shade(p, Vec3::Z, t).expect("valid point");
         points.iter().map(shade).collect::<Vec<_>>()
     });
-    let rel: Vec<f64> = results
+    let radiance: Vec<DVec3> = results.iter().map(|r| r.radiance).collect();
+    let largest_error = radiance
         .iter()
         .zip(exact)
-        .map(|(r, e)| ((r.radiance - *e) / *e).max_element())
-        .collect();
+        .map(|(r, e)| ((*r - *e) / *e).abs().max_element())
+        .fold(0.0, f64::max);
     let n = points.len() as f64;
     [
-        rel.windows(2)
-            .map(|w| (w[1] - w[0]).abs())
-            .fold(0.0, f64::max),
-        rel.iter().map(|r| r.abs()).fold(0.0, f64::max),
+        largest_jump(&radiance, exact),
+        largest_error,
         results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / n,
         time.as_secs_f64() * 1e6 / n,
     ]
@@ -91,9 +178,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let (out, band, count) = (Path::new("out"), BAND, SCANLINE_POINTS);
     let tree = LightTree::build(&lamp_grid(BLOCKS, SEED))?;
     let (a, b) = SCANLINE;
-    let points: Vec<Vec3> = (0..count)
-        .map(|i| a.lerp(b, i as f32 / (count - 1) as f32))
-        .collect();
+    let points = along(a, b, count);
     let exact = shade(&tree, &points, None);
 
     println!(
@@ -126,6 +211,7 @@ fn main() -> Result<(), Box<dyn Error>> {
             t * 100.0
         );
     }
+    horizon(band)?;
 
     // The paper's pair, seen from above over two blocks.
     let side = IMAGE_SIZE as usize;

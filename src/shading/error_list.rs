@@ -299,12 +299,7 @@ impl ErrorList {
         Some(&self.entries[slot as usize])
     }
 
-    #[inline]
-    pub(crate) fn pop(&mut self) -> Option<Entry> {
-        self.pop_slot().map(|(e, _)| e)
-    }
-
-    /// [`pop`](Self::pop), with the entry's slot.
+    /// Removes the largest waiting entry; returns it with its slot.
     #[inline]
     pub(crate) fn pop_slot(&mut self) -> Option<(Entry, u32)> {
         let (slot, prev, bucket) = self.find_best()?;
@@ -391,41 +386,5 @@ impl ErrorList {
             .enumerate()
             .filter(|(_, (_, key))| **key >= 0.0)
             .map(|(s, (e, _))| (e, s as u32))
-    }
-
-    /// Removes every waiting entry, in the order they were pushed.
-    pub(crate) fn drain(&mut self) -> Drain<'_> {
-        Drain {
-            list: self,
-            slot: 0,
-        }
-    }
-}
-
-/// The iterator of [`ErrorList::drain`]; the list is empty once it is
-/// dropped.
-pub(crate) struct Drain<'a> {
-    list: &'a mut ErrorList,
-    slot: usize,
-}
-
-impl Iterator for Drain<'_> {
-    type Item = Entry;
-
-    fn next(&mut self) -> Option<Entry> {
-        let list = &*self.list;
-        while let Some(&key) = list.keys.get(self.slot) {
-            self.slot += 1;
-            if key >= 0.0 {
-                return Some(list.entries[self.slot - 1]);
-            }
-        }
-        None
-    }
-}
-
-impl Drop for Drain<'_> {
-    fn drop(&mut self) {
-        self.list.clear();
     }
 }

@@ -21,7 +21,7 @@ use crate::shader::{Shader, ViewIndependent};
 use crate::tree::LightTree;
 use crate::visibility::{Unoccluded, Visibility};
 
-use blend::Pending;
+use blend::{Item, Nesting};
 use error_list::ErrorList;
 use refine::{Cut, reported_bound};
 
@@ -54,7 +54,8 @@ pub struct Shading<'t, S: Shader> {
 #[derive(Debug, Default)]
 struct Scratch {
     list: ErrorList,
-    blend: Vec<Pending>,
+    blend: Vec<Item>,
+    nesting: Nesting,
     batch: batch::BatchScratch,
 }
 
@@ -123,19 +124,31 @@ impl<'t, S: Shader> Shading<'t, S> {
             visibility,
         );
         let list = &mut self.scratch.list;
-        let outcome = cut.run(list, &threshold);
-        let (estimate, error) = list.resum();
+        let nesting = &mut self.scratch.nesting;
+        let interpolating = threshold.interpolation().is_some();
+        let outcome = cut.run(list, &threshold, interpolating.then_some(&mut *nesting));
         let unbounded = list.has_unbounded();
-        let mut radiance = cut.settled.value() + estimate;
-        let mut bound = reported_bound(error);
+        let (estimate, error) = list.resum();
+        let (mut radiance, mut bound) = (cut.settled.value() + estimate, reported_bound(error));
+        if interpolating && !unbounded {
+            // Each refined node's interval intersected with its children's.
+            (radiance, bound) = nesting.fold(list);
+        }
         if let (Some(band), Stop::ThresholdMet) = (threshold.interpolation(), outcome.stop) {
             let top = list.largest();
             let after = threshold.excess(radiance, bound, top);
             let level = blend::level(outcome.last_step, after, top);
-            // The blend refines no node less than the error list did, so the
-            // largest single error cannot grow; only the sum is re-checked.
-            if let Some((r, e)) = blend::blend(&mut cut, list, &mut self.scratch.blend, level, band)
-                && threshold.met(r, e, 0.0)
+            // The blend refines no node less than the error list did and
+            // never widens an interval, so the largest single error cannot
+            // grow; only the sum is re-checked.
+            if let Some((r, e)) = blend::blend(
+                &mut cut,
+                list,
+                nesting,
+                &mut self.scratch.blend,
+                level,
+                band,
+            ) && threshold.met(r, e, 0.0)
             {
                 (radiance, bound) = (r, e);
             }

@@ -4,6 +4,7 @@
 
 use glam::{DVec3, Vec3};
 
+use super::blend::{NO_PARENT, Nesting};
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::result::Stop;
 use super::threshold::Threshold;
@@ -120,12 +121,30 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// it); an entry whose visibility is unknown is first asked about, and
     /// the answer decides: occluded entries drop out, visible ones go back
     /// with their unoccluded interval, partial ones are refined.
-    pub(crate) fn run(&mut self, list: &mut ErrorList, threshold: &Threshold) -> Outcome {
+    ///
+    /// With `nesting` (interpolation across levels), priorities are capped
+    /// at the parent's and the refined part of the cut is recorded for the
+    /// blend (see [`blend`](super::blend)).
+    pub(crate) fn run(
+        &mut self,
+        list: &mut ErrorList,
+        threshold: &Threshold,
+        mut nesting: Option<&mut Nesting>,
+    ) -> Outcome {
         list.clear();
+        if let Some(n) = nesting.as_deref_mut() {
+            n.clear();
+        }
         if !self.tree.nodes.is_empty()
             && let Some(root) = self.evaluate(0, V::ALWAYS_VISIBLE, 1.0)
         {
             list.push(root);
+            if let Some(n) = nesting.as_deref_mut() {
+                n.pushed(&root, NO_PARENT);
+            }
+        }
+        if let Some(n) = nesting.as_deref_mut() {
+            n.settled(NO_PARENT, self.settled.value());
         }
         let mut outcome = Outcome {
             stop: Stop::ThresholdMet,
@@ -133,10 +152,26 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         };
         loop {
             let largest = list.largest();
-            if list.may_stop() && self.met(list.sums(), largest, threshold) {
+            // The cut's sums: the waiting entries' and what is settled, or
+            // with nesting each refined node's interval intersected with its
+            // children's.
+            let sums = match nesting.as_deref() {
+                Some(n) => n.totals(),
+                None => {
+                    let (estimate, error) = list.sums();
+                    (self.settled.value() + estimate, error)
+                }
+            };
+            if list.may_stop() && met(sums, largest, threshold) {
                 // Confirm with exact sums: the running ones drift.
-                let sums = list.resum();
-                if self.met(sums, largest, threshold) {
+                let sums = match nesting.as_deref_mut() {
+                    Some(n) => n.fold(list),
+                    None => {
+                        let (estimate, error) = list.resum();
+                        (self.settled.value() + estimate, reported_bound(error))
+                    }
+                };
+                if threshold.met(sums.0, sums.1, largest) {
                     break;
                 }
             }
@@ -152,15 +187,13 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             if refining {
                 // Only refinements place the interpolation level; asking the
                 // host changes what an entry counts for, not the level.
-                let (estimate, error) = list.sums();
-                let before = threshold.excess(
-                    self.settled.value() + estimate,
-                    reported_bound(error),
-                    largest,
-                );
+                let before = threshold.excess(sums.0, reported_bound(sums.1), largest);
                 outcome.last_step = Some((before, top.key));
             }
-            list.pop();
+            let Some((_, slot)) = list.pop_slot() else {
+                break;
+            };
+            let parent = nesting.as_deref_mut().map(|n| n.taken(&top, slot));
             if refining {
                 // The next node to refine is probably the one waiting on top
                 // now: its children load while this one's are evaluated.
@@ -168,25 +201,41 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     self.tree.prefetch_refinement(next.node as usize);
                 }
                 let visible = top.seen == Seen::Visible;
-                self.refine(&node, visible, 1.0, |e| {
+                if let (Some(n), Some(parent)) = (nesting.as_deref_mut(), parent) {
+                    // Children's priorities are capped at the parent's.
+                    let frame = n.refined(&top, parent);
+                    let outer = std::mem::take(&mut self.settled);
+                    self.refine(&node, visible, 1.0, |mut e| {
+                        e.key = e.key.min(top.key);
+                        list.push(e);
+                        n.pushed(&e, frame);
+                    });
+                    let settled = std::mem::replace(&mut self.settled, outer).value();
+                    self.settled.add(settled);
+                    n.settled(frame, settled);
+                    n.finish(frame);
+                } else {
+                    self.refine(&node, visible, 1.0, |e| {
+                        list.push(e);
+                    });
+                }
+            } else if let (Some(n), Some(parent)) = (nesting.as_deref_mut(), parent) {
+                let outer = std::mem::take(&mut self.settled);
+                let entry = self.classify(&node, top);
+                let settled = std::mem::replace(&mut self.settled, outer).value();
+                self.settled.add(settled);
+                n.settled(parent, settled);
+                if let Some(mut e) = entry {
+                    e.key = e.key.min(top.key);
                     list.push(e);
-                });
+                    n.pushed(&e, parent);
+                }
+                n.finish(parent);
             } else if let Some(e) = self.classify(&node, top) {
                 list.push(e);
             }
         }
         outcome
-    }
-
-    /// Whether the cut with the error list's `(estimate, error)` sums meets
-    /// the threshold, with the error bound exactly as it will be reported.
-    #[inline]
-    fn met(&self, (estimate, error): (DVec3, DVec3), largest: f64, threshold: &Threshold) -> bool {
-        threshold.met(
-            self.settled.value() + estimate,
-            reported_bound(error),
-            largest,
-        )
     }
 
     /// Whether the host's classifications have been useless so far in this
@@ -397,6 +446,13 @@ const GIVE_UP_RATIO: u32 = 8;
 /// one, its few lights are soon asked one by one, so the classification did
 /// not pay.
 const SMALL_NODE_LIGHTS: u32 = 16;
+
+/// Whether a cut of summed `(estimate, error)` meets the threshold, with
+/// the error bound exactly as it will be reported.
+#[inline]
+fn met((estimate, error): (DVec3, DVec3), largest: f64, threshold: &Threshold) -> bool {
+    threshold.met(estimate, reported_bound(error), largest)
+}
 
 /// The certified bound reported for a summed error: the compensated sums
 /// are within a few ulps of the sums of magnitudes; what that leaves of the

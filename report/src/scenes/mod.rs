@@ -18,11 +18,14 @@
 //!   diffuse ground, a glossy floor, and a glossy floor with spheres.
 //! * [`ground_lights`], [`ground_points`]: lights 4 to 6 units above a
 //!   1000 x 1000 ground, points on it (the evaluations-per-point table).
+//! * [`sphere_lights`]: lights over a sphere, for points whose tangent
+//!   plane cuts it (the `seams` example's horizon scanlines).
 
 mod canopy;
 mod chandelier;
 mod ground;
 mod night_city;
+mod sphere;
 mod streets;
 mod strings;
 
@@ -30,6 +33,7 @@ pub use canopy::canopy;
 pub use chandelier::chandelier;
 pub use ground::{GROUND_SIZE, ground_lights, ground_points};
 pub use night_city::{Building, City, GROUND_ALBEDO, SHADOW_BLOCKS, city_shadows};
+pub use sphere::{SPHERE_RADIUS, sphere_lights};
 pub use streets::{GRID_BLOCK, city, city_lights, lamp_grid};
 pub use strings::{
     GLOSSY_EXPONENT, GLOSSY_SCENE_EXPONENT, Glossy, GlossyHit, Sphere, specular, strings,
