@@ -376,8 +376,7 @@ fn nest(
     magnitude: &mut DVec3,
 ) -> (DVec3, DVec3) {
     let (c_lo, c_hi) = (sum_lo.value(), sum_hi.value());
-    let (i_lo, i_hi) = (lo.max(c_lo), hi.min(c_hi));
-    let (i_lo, i_hi) = (i_lo.min(i_hi), i_lo.max(i_hi));
+    let (i_lo, i_hi) = bounds(intersect(Some((lo, hi)), Some((c_lo, c_hi))));
     *magnitude += c_lo.abs() + c_hi.abs();
     if alpha >= 1.0 {
         return (i_lo, i_hi);

@@ -174,7 +174,7 @@ impl Threshold {
     /// error 15 to 90 times smaller at thresholds of 1% to 20%, with about
     /// 0.56 times the evaluations (the nested intervals meet the target
     /// sooner) and twice the time; on scanlines whose tangent plane cuts a
-    /// sphere of lights, 10 to 180 times smaller at 5% and 20%, and only
+    /// sphere of lights, 8 to 180 times smaller at 5% and 20%, and only
     /// 2.6 to 3.5 times at 1%, where near-ties remain.
     #[must_use]
     pub const fn with_interpolation(mut self, band: f64) -> Self {
