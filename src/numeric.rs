@@ -206,6 +206,13 @@ impl CompensatedSum {
         self.sum = t;
     }
 
+    /// Adds `term` without compensation: faster, and as accurate as plain
+    /// summation from here on.
+    #[inline]
+    pub(crate) fn add_plain(&mut self, term: DVec3) {
+        self.sum += term;
+    }
+
     #[inline]
     #[must_use]
     pub(crate) fn value(&self) -> DVec3 {

@@ -2,34 +2,34 @@
 //! cut's last nodes blended with their children so the estimate is
 //! continuous in the shading point.
 //!
-//! Two things make the blend a continuous function of the shading point:
+//! Three things make the blend a continuous function of the shading point:
 //!
-//! * **A monotone order.** With interpolation, a node's priority in the
-//!   error list is capped at its parent's, so nodes are refined in
-//!   decreasing priority down every path and the refined set is a function
-//!   of the priorities alone: two nodes trading places changes nothing at
-//!   the point where their priorities are equal. (A child's error may
-//!   exceed its parent's; uncapped, refining the parent first would let the
-//!   child jump the queue, and the cut would change abruptly where two
-//!   priorities cross.)
+//! * **Weights from priorities.** Every node of the cut, refined by the
+//!   list or not, is given a refinement weight from its priority and the
+//!   level (see [`Ramp`]); with interpolation a node's priority is capped
+//!   at its parent's, so weights never grow down a path, and a node whose
+//!   weight is 0 has no refined descendants.
 //! * **Nested intervals.** A node's certified interval `A` and the sum `C`
 //!   of its children's both hold the node's exact value, so their
 //!   intersection does too; a node refined with weight `alpha` counts for
 //!   `(1 - alpha) A + alpha (A ∩ C)`, which holds the exact value (a mixture
 //!   of two intervals that both hold it) and lies in `A`. So refining never
-//!   widens the bound, whether the list refined the node or the blend
-//!   ramps it, and the nodes the list refined apply their intersections
-//!   the same way as nodes the blend refines: nothing changes where a node
-//!   passes from one to the other. Without it, children whose summed error
-//!   exceeds their parent's made the blended cut miss the threshold at some
-//!   points and not at their neighbours.
+//!   widens the bound, and a node counts the same whether the list refined
+//!   it (a frame of [`Nesting`]) or the blend expands it (an [`Item`]):
+//!   nothing changes where a node passes from one to the other. Without it,
+//!   children whose summed error exceeds their parent's made the blended
+//!   cut miss the threshold at some points and not at their neighbours.
+//! * **A level that solves for the target.** The level is the root of the
+//!   blended cut's excess over the target ([`interpolate`]), not a function
+//!   of the list's last steps: those depend on the order in which the list
+//!   took nodes of nearly equal priority, and placing the level from them
+//!   left jumps where two such nodes traded places; the root does not.
 
 use glam::DVec3;
 
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::refine::{Cut, reported_bound};
-#[cfg(doc)]
-use super::threshold::Threshold;
+use super::threshold::{Target, Threshold};
 use crate::numeric::CompensatedSum;
 use crate::shader::Shader;
 use crate::visibility::Visibility;
@@ -95,6 +95,13 @@ pub(crate) struct Nesting {
     top: Running,
     /// The same, exactly: the root's settled value.
     top_settled: CompensatedSum,
+    /// What lies outside any frame and counts whole at every level the
+    /// blend tries (see [`expand`]), exactly settled values included.
+    top_fixed_lo: CompensatedSum,
+    top_fixed_hi: CompensatedSum,
+    /// The magnitudes of every fixed term, frames' and items', for the
+    /// rounding allowance.
+    fixed_magnitude: DVec3,
     /// Accumulators of [`fold`](Self::fold) and the blend.
     top_lo: CompensatedSum,
     top_hi: CompensatedSum,
@@ -105,6 +112,10 @@ pub(crate) struct Nesting {
 struct Frame {
     /// The frame of its parent, or [`NO_PARENT`].
     parent: u32,
+    /// Its priority when it was refined; infinite for a node the list had
+    /// to refine whatever its error (over the maximal contribution), which
+    /// the blend never un-refines.
+    key: f64,
     /// Its certified interval when it was refined.
     own: Interval,
     /// What its refinement settled exactly (lights, dark or error-free
@@ -114,6 +125,10 @@ struct Frame {
     running: Running,
     /// What it last contributed to its parent's running sum.
     current: Interval,
+    /// Its settled value plus what counts whole under it at every level the
+    /// blend tries.
+    fixed_lo: CompensatedSum,
+    fixed_hi: CompensatedSum,
     /// Accumulators of [`fold`](Nesting::fold) and the blend.
     sum_lo: CompensatedSum,
     sum_hi: CompensatedSum,
@@ -178,10 +193,17 @@ impl Nesting {
     pub(crate) fn refined(&mut self, e: &Entry, parent: u32) -> u32 {
         self.frames.push(Frame {
             parent,
+            key: if e.class == Class::Error {
+                e.key
+            } else {
+                f64::INFINITY
+            },
             own: interval(e),
             settled: CompensatedSum::default(),
             running: Running::default(),
             current: Some((DVec3::ZERO, DVec3::ZERO)),
+            fixed_lo: CompensatedSum::default(),
+            fixed_hi: CompensatedSum::default(),
             sum_lo: CompensatedSum::default(),
             sum_hi: CompensatedSum::default(),
         });
@@ -231,9 +253,9 @@ impl Nesting {
         let mut magnitude = DVec3::ZERO;
         for (e, slot) in list.waiting() {
             let (lo, hi) = bounds(interval(e));
-            self.add(self.parents[slot as usize], lo, hi, &mut magnitude);
+            self.add::<true>(self.parents[slot as usize], lo, hi, &mut magnitude);
         }
-        self.fold_frames(magnitude)
+        self.fold_frames::<true>(magnitude, &Ramp::FULL)
     }
 
     /// Sets every accumulator to the exact values settled under it.
@@ -247,27 +269,75 @@ impl Nesting {
     }
 
     /// Adds an interval to the accumulators of frame `frame` (or of what
-    /// lies outside any).
+    /// lies outside any), compensated if `EXACT`.
     #[inline]
-    fn add(&mut self, frame: u32, lo: DVec3, hi: DVec3, magnitude: &mut DVec3) {
+    fn add<const EXACT: bool>(&mut self, frame: u32, lo: DVec3, hi: DVec3, magnitude: &mut DVec3) {
         let (sum_lo, sum_hi) = if frame == NO_PARENT {
             (&mut self.top_lo, &mut self.top_hi)
         } else {
             let f = &mut self.frames[frame as usize];
             (&mut f.sum_lo, &mut f.sum_hi)
         };
-        sum_lo.add(lo);
-        sum_hi.add(hi);
+        accumulate::<EXACT>(sum_lo, sum_hi, lo, hi);
         *magnitude += lo.abs() + hi.abs();
     }
 
+    /// Sets every accumulator to its fixed terms (see [`expand`]).
+    fn reset_to_fixed(&mut self) {
+        for f in &mut self.frames {
+            f.sum_lo = f.fixed_lo;
+            f.sum_hi = f.fixed_hi;
+        }
+        self.top_lo = self.top_fixed_lo;
+        self.top_hi = self.top_fixed_hi;
+    }
+
+    /// Adds an interval to the fixed terms of frame `frame` (or of what
+    /// lies outside any).
+    #[inline]
+    fn add_fixed(&mut self, frame: u32, lo: DVec3, hi: DVec3) {
+        let (sum_lo, sum_hi) = if frame == NO_PARENT {
+            (&mut self.top_fixed_lo, &mut self.top_fixed_hi)
+        } else {
+            let f = &mut self.frames[frame as usize];
+            (&mut f.fixed_lo, &mut f.fixed_hi)
+        };
+        sum_lo.add(lo);
+        sum_hi.add(hi);
+        self.fixed_magnitude += lo.abs() + hi.abs();
+    }
+
+    /// The largest priority of a frame the blend may un-refine: above
+    /// `band` times it, every such frame counts for its own interval.
+    fn highest_key(&self) -> Option<f64> {
+        self.frames
+            .iter()
+            .map(|f| f.key)
+            .filter(|k| k.is_finite())
+            .reduce(f64::max)
+    }
+
     /// Folds the frames' accumulators into their parents', children first,
-    /// and returns the midpoint and certified half-width of the total.
-    fn fold_frames(&mut self, mut magnitude: DVec3) -> (DVec3, DVec3) {
+    /// each frame weighted by `ramp`, and returns the midpoint and
+    /// half-width of the total: certified if `EXACT` (compensated sums),
+    /// else plain sums, for a search.
+    fn fold_frames<const EXACT: bool>(
+        &mut self,
+        mut magnitude: DVec3,
+        ramp: &Ramp,
+    ) -> (DVec3, DVec3) {
         for f in (0..self.frames.len()).rev() {
-            let fr = self.frames[f];
-            let (lo, hi) = nest(1.0, bounds(fr.own), &fr.sum_lo, &fr.sum_hi, &mut magnitude);
-            self.add(fr.parent, lo, hi, &mut magnitude);
+            let fr = &self.frames[f];
+            let parent = fr.parent;
+            let alpha = ramp.alpha(fr.key);
+            let (lo, hi) = nest(
+                alpha,
+                bounds(fr.own),
+                &fr.sum_lo,
+                &fr.sum_hi,
+                &mut magnitude,
+            );
+            self.add::<EXACT>(parent, lo, hi, &mut magnitude);
         }
         let (lo, hi) = (self.top_lo.value(), self.top_hi.value());
         if !(lo.is_finite() && hi.is_finite()) {
@@ -329,8 +399,8 @@ fn intersect(a: Interval, b: Interval) -> Interval {
     }
 }
 
-/// A node the blend refines (with weight `alpha`), waiting for its
-/// children's intervals.
+/// A node the blend refines (with weight `alpha` at the level being
+/// tried), waiting for its children's intervals.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Item {
     node: u32,
@@ -338,21 +408,60 @@ pub(crate) struct Item {
     /// result goes to `frame`.
     parent: u32,
     frame: u32,
-    alpha: f64,
     /// Its priority, the cap of its children's.
     key: f64,
     visible: bool,
     lo: DVec3,
     hi: DVec3,
+    /// What its refinement settled exactly plus its children that count
+    /// whole at every level tried.
+    fixed_lo: CompensatedSum,
+    fixed_hi: CompensatedSum,
     sum_lo: CompensatedSum,
     sum_hi: CompensatedSum,
 }
 
-/// The level at which the error list stopped, for the blend: between the
-/// key of the last refinement (where the list would have stopped one step
-/// earlier) and the largest key left, in proportion to where the excess
-/// over the target crossed zero, so that it is continuous where the
-/// stopping step changes.
+/// Refinement weights at a level: nodes of priority at least `level` are
+/// refined fully, and the weight falls linearly to 0 at `floor = level /
+/// band`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Ramp {
+    level: f64,
+    floor: f64,
+}
+
+impl Ramp {
+    /// Every node refined fully: the error list's own cut.
+    const FULL: Self = Self {
+        level: f64::NEG_INFINITY,
+        floor: f64::NEG_INFINITY,
+    };
+
+    fn new(level: f64, band: f64) -> Self {
+        Self {
+            level,
+            floor: level / band,
+        }
+    }
+
+    /// The weight of a node of priority `key` (infinite for a node with no
+    /// finite bound, always refined).
+    #[inline]
+    fn alpha(&self, key: f64) -> f64 {
+        if key >= self.level {
+            1.0
+        } else {
+            ((key - self.floor) / (self.level - self.floor)).clamp(0.0, 1.0)
+        }
+    }
+}
+
+/// The level at which the error list stopped, for the per-node target
+/// (whose excess does not depend on the blend): between the key of the
+/// last refinement (where the list would have stopped one step earlier)
+/// and the largest key left, in proportion to where the excess over the
+/// target crossed zero, so that it is continuous where the stopping step
+/// changes.
 pub(crate) fn level(last_step: Option<(f64, f64)>, after: f64, top: f64) -> f64 {
     match last_step {
         Some((before, key)) if before > 0.0 && before.is_finite() => {
@@ -375,6 +484,10 @@ fn nest(
     sum_hi: &CompensatedSum,
     magnitude: &mut DVec3,
 ) -> (DVec3, DVec3) {
+    if alpha <= 0.0 {
+        *magnitude += lo.abs() + hi.abs();
+        return (lo, hi);
+    }
     let (c_lo, c_hi) = (sum_lo.value(), sum_hi.value());
     let (i_lo, i_hi) = bounds(intersect(Some((lo, hi)), Some((c_lo, c_hi))));
     *magnitude += c_lo.abs() + c_hi.abs();
@@ -388,114 +501,267 @@ fn nest(
     )
 }
 
-/// Blends every unrefined node of `list` whose priority lies within `band`
-/// of `level` with its children, recursively, and intersects every refined
-/// node's interval with its children's (the list's, recorded in
-/// `nesting`, and the blend's). Returns the blended radiance and certified
-/// bound, or `None` when there is nothing to blend or blending would exceed
-/// the budget.
-pub(crate) fn blend<S: Shader, V: Visibility>(
+/// Interpolation across levels after the error list met `threshold`
+/// (`top` the largest priority left, `after` the list's excess):
+/// the blended radiance and certified bound, or `None` to keep the list's
+/// cut (nothing refined, a target the blend cannot meet, or a budget the
+/// blend would exceed).
+///
+/// The level `tau` is where the blended cut just meets the target:
+/// `g(tau) = 0` for the excess `g` of the blend at level `tau` over the
+/// target. `g` is continuous in `tau` and in the shading point, and
+/// non-decreasing in `tau` (a lower level refines more, which never widens
+/// an interval, and moves the estimate by at most what it narrows the
+/// bound), so its root is a continuous function of the shading point,
+/// whatever order the list refined nodes of nearly equal priority in. The
+/// list's cut brackets it: the blend at the last refinement's priority
+/// refines at least as much as the list did, so it meets the target, and
+/// above the largest priority times `band` it refines nothing. The root is
+/// found by regula falsi (Illinois) on `ln tau`, each step a fold of the
+/// blend's arena, which is expanded once, for the lowest level tried.
+/// The per-node target's excess does not depend on the blend; it keeps
+/// the level placed between the list's last two steps ([`level`]).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn interpolate<S: Shader, V: Visibility>(
     cut: &mut Cut<'_, S, V>,
     list: &ErrorList,
     nesting: &mut Nesting,
     items: &mut Vec<Item>,
-    level: f64,
+    threshold: &Threshold,
     band: f64,
+    last_step: Option<(f64, f64)>,
+    (top, after): (f64, f64),
 ) -> Option<(DVec3, DVec3)> {
-    if list.len() == 0 || !(level > 0.0 && level.is_finite()) {
+    if list.len() == 0 {
         return None;
     }
-    let floor = level / band;
-    let ramp = |e: &Entry| {
-        if e.class == Class::Unbounded {
-            1.0
-        } else {
-            ((e.key - floor) / (level - floor)).clamp(0.0, 1.0)
+    if matches!(threshold.target(), Target::PerNode(_)) {
+        let level = level(last_step, after, top);
+        if !(level > 0.0 && level.is_finite() && expand(cut, list, nesting, items, level, band)) {
+            return None;
         }
+        return Some(fold_at::<true>(nesting, items, &Ramp::new(level, band)));
+    }
+    let (_, lowest) = last_step?;
+    let highest = nesting.highest_key()?.max(lowest) * band;
+    if !(lowest > 0.0 && highest.is_finite() && expand(cut, list, nesting, items, lowest, band)) {
+        return None;
+    }
+    // The search sums plainly: a level counts as meeting the target only
+    // with a margin for the plain sums' rounding, so that the certified
+    // fold at the level found meets it too.
+    let excess = |(r, e): (DVec3, DVec3)| {
+        threshold.excess(r, e, 0.0) + PLAIN_SLACK * (r.abs() + e).max_element()
     };
-    // Operands' magnitudes, for the rounding allowance.
-    let mut magnitude = DVec3::ZERO;
-    nesting.reset_sums();
-    items.clear();
-    // Waiting entries: kept whole (alpha = 0) in their parent's sum, or
-    // refined by the blend.
-    for (e, slot) in list.waiting() {
-        let frame = nesting.parents[slot as usize];
-        let alpha = ramp(e);
-        if alpha > 0.0 {
-            items.push(item(e, NO_PARENT, frame, alpha));
-        } else {
-            let (lo, hi) = bounds(interval(e));
-            nesting.add(frame, lo, hi, &mut magnitude);
+    let mut at = |tau: f64| {
+        let folded = fold_at::<false>(nesting, items, &Ramp::new(tau, band));
+        (folded, excess(folded))
+    };
+    let ((_, bound), g_lo) = at(lowest);
+    if !(g_lo <= 0.0) {
+        return None;
+    }
+    // The least refined level known to meet the target.
+    let mut best = lowest;
+    // Above the list's last step times `band` the blend refines less than
+    // the list did before that step, which missed the target; failing that,
+    // above the largest priority times `band` it refines nothing.
+    let (mut upper, mut g_up) = (lowest * band, 0.0);
+    for candidate in [lowest * band, highest] {
+        let (_, g) = at(candidate);
+        (upper, g_up) = (candidate, g);
+        if g > 0.0 {
+            break;
+        }
+        best = candidate;
+    }
+    if g_up > 0.0 {
+        // Illinois (regula falsi that halves the stale end's value) on `1 /
+        // tau`, in which every weight is linear between its clamps.
+        let (mut a, mut b) = (1.0 / lowest, 1.0 / upper);
+        let (mut fa, mut fb) = (g_lo, g_up);
+        let mut g_best = g_lo;
+        let tolerance = ROOT_TOLERANCE * bound.max_element();
+        let mut side = 0;
+        for _ in 0..ROOT_STEPS {
+            if g_best >= -tolerance || !(a - b > ROOT_SPAN * a) {
+                break;
+            }
+            let c = (a + (b - a) * (fa / (fa - fb))).clamp(b, a);
+            let (_, g) = at(1.0 / c);
+            if g <= 0.0 {
+                (a, fa, best, g_best) = (c, g, 1.0 / c, g);
+                if side < 0 {
+                    fb *= 0.5;
+                }
+                side = -1;
+            } else {
+                (b, fb) = (c, g);
+                if side > 0 {
+                    fa *= 0.5;
+                }
+                side = 1;
+            }
         }
     }
-    // Expand breadth-first: every item is refined once, its children kept
-    // whole or appended as items (parents before children).
+    // The search summed plainly; the result is summed again, certified
+    // (and where that misses the target after all, the most refined level
+    // tried is).
+    let found = fold_at::<true>(nesting, items, &Ramp::new(best, band));
+    if threshold.met(found.0, found.1, 0.0) || best == lowest {
+        return Some(found);
+    }
+    Some(fold_at::<true>(nesting, items, &Ramp::new(lowest, band)))
+}
+
+/// The plain sums' rounding allowed for in the search, relative to the
+/// radiance and bound (a million terms' worth of `f64` roundings).
+const PLAIN_SLACK: f64 = 1e-9;
+/// Steps of the root search for the level, at most.
+const ROOT_STEPS: u32 = 40;
+/// The search stops once the blend's excess is within this fraction of its
+/// bound below zero: the estimate then moves by about as much between
+/// neighbouring points, far below any threshold.
+const ROOT_TOLERANCE: f64 = 1e-4;
+/// Or once the bracket on `ln tau` is this narrow (relative).
+const ROOT_SPAN: f64 = 1e-14;
+
+/// Expands the blend's arena for every level at or above `lowest`: the
+/// waiting entries and, recursively, the children whose weight at `lowest`
+/// is positive become items; everything else counts whole at every such
+/// level (children's keys are capped at their parents', so weights only
+/// fall with the level) and is summed once into the fixed terms of its
+/// item or frame. `false` when the expansion would exceed the budget.
+fn expand<S: Shader, V: Visibility>(
+    cut: &mut Cut<'_, S, V>,
+    list: &ErrorList,
+    nesting: &mut Nesting,
+    items: &mut Vec<Item>,
+    lowest: f64,
+    band: f64,
+) -> bool {
+    let ramp = Ramp::new(lowest, band);
+    for f in &mut nesting.frames {
+        f.fixed_lo = f.settled;
+        f.fixed_hi = f.settled;
+    }
+    nesting.top_fixed_lo = nesting.top_settled;
+    nesting.top_fixed_hi = nesting.top_settled;
+    nesting.fixed_magnitude = DVec3::ZERO;
+    items.clear();
+    for (e, slot) in list.waiting() {
+        let frame = nesting.parents[slot as usize];
+        if ramp.alpha(e.key) > 0.0 {
+            items.push(item(e, NO_PARENT, frame));
+        } else {
+            let (lo, hi) = bounds(interval(e));
+            nesting.add_fixed(frame, lo, hi);
+        }
+    }
+    // Breadth-first: every item is refined once, its children kept whole or
+    // appended as items (parents before children).
     let mut next = 0;
     while next < items.len() {
-        let it = items[next];
-        let node = cut.tree.nodes[it.node as usize];
-        if !cut.can_refine(&node, it.visible) {
-            return None;
+        let (node, visible, key, frame) = {
+            let it = &items[next];
+            (it.node, it.visible, it.key, it.frame)
+        };
+        let node = cut.tree.nodes[node as usize];
+        if !cut.can_refine(&node, visible) {
+            return false;
         }
         let parent = next as u32;
         let outer = std::mem::take(&mut cut.settled);
-        cut.refine(&node, it.visible, 1.0, |mut e| {
-            e.key = e.key.min(it.key);
-            let alpha = ramp(&e);
-            if alpha > 0.0 {
-                items.push(item(&e, parent, it.frame, alpha));
+        let magnitude = &mut nesting.fixed_magnitude;
+        cut.refine(&node, visible, 1.0, |mut e| {
+            e.key = e.key.min(key);
+            if ramp.alpha(e.key) > 0.0 {
+                items.push(item(&e, parent, frame));
             } else {
                 let (lo, hi) = bounds(interval(&e));
                 let p = &mut items[parent as usize];
-                p.sum_lo.add(lo);
-                p.sum_hi.add(hi);
-                magnitude += lo.abs() + hi.abs();
+                p.fixed_lo.add(lo);
+                p.fixed_hi.add(hi);
+                *magnitude += lo.abs() + hi.abs();
             }
         });
         let settled = std::mem::replace(&mut cut.settled, outer).value();
         let p = &mut items[next];
-        p.sum_lo.add(settled);
-        p.sum_hi.add(settled);
-        magnitude += 2.0 * settled.abs();
+        p.fixed_lo.add(settled);
+        p.fixed_hi.add(settled);
+        nesting.fixed_magnitude += 2.0 * settled.abs();
         next += 1;
     }
-    // Fold children into parents: the items in reverse, then the frames.
+    true
+}
+
+/// The blend at the weights of `ramp`, over the arena [`expand`] built
+/// for a level at or below `ramp`'s: the radiance and bound, certified if
+/// `EXACT` (else summed plainly, for the search).
+fn fold_at<const EXACT: bool>(
+    nesting: &mut Nesting,
+    items: &mut [Item],
+    ramp: &Ramp,
+) -> (DVec3, DVec3) {
+    nesting.reset_to_fixed();
+    let mut magnitude = nesting.fixed_magnitude;
+    for it in items.iter_mut() {
+        it.sum_lo = it.fixed_lo;
+        it.sum_hi = it.fixed_hi;
+    }
+    // Children into parents: the items in reverse, then the frames.
     for i in (0..items.len()).rev() {
-        let it = items[i];
+        let it = &items[i];
+        let (parent, frame) = (it.parent, it.frame);
         let (lo, hi) = nest(
-            it.alpha,
+            ramp.alpha(it.key),
             (it.lo, it.hi),
             &it.sum_lo,
             &it.sum_hi,
             &mut magnitude,
         );
-        if it.parent == NO_PARENT {
-            nesting.add(it.frame, lo, hi, &mut magnitude);
+        if parent == NO_PARENT {
+            nesting.add::<EXACT>(frame, lo, hi, &mut magnitude);
         } else {
-            let p = &mut items[it.parent as usize];
-            p.sum_lo.add(lo);
-            p.sum_hi.add(hi);
+            let p = &mut items[parent as usize];
+            accumulate::<EXACT>(&mut p.sum_lo, &mut p.sum_hi, lo, hi);
             magnitude += lo.abs() + hi.abs();
         }
     }
-    let (radiance, bound) = nesting.fold_frames(magnitude);
-    bound.is_finite().then_some((radiance, bound))
+    nesting.fold_frames::<EXACT>(magnitude, ramp)
 }
 
-/// An item for `e`, refined with weight `alpha`.
+/// Adds an interval's ends to their sums, compensated if `EXACT`.
 #[inline]
-fn item(e: &Entry, parent: u32, frame: u32, alpha: f64) -> Item {
+fn accumulate<const EXACT: bool>(
+    sum_lo: &mut CompensatedSum,
+    sum_hi: &mut CompensatedSum,
+    lo: DVec3,
+    hi: DVec3,
+) {
+    if EXACT {
+        sum_lo.add(lo);
+        sum_hi.add(hi);
+    } else {
+        sum_lo.add_plain(lo);
+        sum_hi.add_plain(hi);
+    }
+}
+
+/// An item for `e`.
+#[inline]
+fn item(e: &Entry, parent: u32, frame: u32) -> Item {
     let (lo, hi) = bounds(interval(e));
     Item {
         node: e.node,
         parent,
         frame,
-        alpha,
         key: e.key,
         visible: e.seen == Seen::Visible,
         lo,
         hi,
+        fixed_lo: CompensatedSum::default(),
+        fixed_hi: CompensatedSum::default(),
         sum_lo: CompensatedSum::default(),
         sum_hi: CompensatedSum::default(),
     }

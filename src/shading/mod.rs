@@ -132,22 +132,23 @@ impl<'t, S: Shader> Shading<'t, S> {
         let (mut radiance, mut bound) = (cut.settled.value() + estimate, reported_bound(error));
         if interpolating && !unbounded {
             // Each refined node's interval intersected with its children's.
-            (radiance, bound) = nesting.fold(list);
+            (radiance, bound) = outcome.confirmed.unwrap_or_else(|| nesting.fold(list));
         }
         if let (Some(band), Stop::ThresholdMet) = (threshold.interpolation(), outcome.stop) {
             let top = list.largest();
             let after = threshold.excess(radiance, bound, top);
-            let level = blend::level(outcome.last_step, after, top);
-            // The blend refines no node less than the error list did and
-            // never widens an interval, so the largest single error cannot
-            // grow; only the sum is re-checked.
-            if let Some((r, e)) = blend::blend(
+            // The blend's bound is re-checked; for the per-node target the
+            // blend refines no node less than the error list did, so the
+            // largest single error cannot grow.
+            if let Some((r, e)) = blend::interpolate(
                 &mut cut,
                 list,
                 nesting,
                 &mut self.scratch.blend,
-                level,
+                &threshold,
                 band,
+                outcome.last_step,
+                (top, after),
             ) && threshold.met(r, e, 0.0)
             {
                 (radiance, bound) = (r, e);

@@ -49,6 +49,9 @@ pub(crate) struct Outcome {
     /// refinement: they place the interpolation level between the last two
     /// steps.
     pub(crate) last_step: Option<(f64, f64)>,
+    /// With nesting, the certified sums that confirmed the stop, if the
+    /// threshold stopped the loop.
+    pub(crate) confirmed: Option<(DVec3, DVec3)>,
 }
 
 impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
@@ -149,6 +152,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         let mut outcome = Outcome {
             stop: Stop::ThresholdMet,
             last_step: None,
+            confirmed: None,
         };
         loop {
             let largest = list.largest();
@@ -172,6 +176,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     }
                 };
                 if threshold.met(sums.0, sums.1, largest) {
+                    outcome.confirmed = nesting.is_some().then_some(sums);
                     break;
                 }
             }
