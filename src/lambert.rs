@@ -312,6 +312,13 @@ impl Shader for Lambert {
     #[inline]
     fn prepare(&self, _surface: &Surface) {}
 
+    /// The given normal: [`eval`](Shader::eval) takes the exact sign of
+    /// `N . (x - p)` and returns 0 where it is 0.
+    #[inline]
+    fn horizon(&self, surface: &Surface) -> Option<Vec3> {
+        Some(surface.given_normal)
+    }
+
     /// The model's term `I kd max(0, n.w) / d^2` with `n = N / |N|` for the
     /// given normal `N`, computed as `N.(x - p) / (|N| d^3)`. For a
     /// `position` holding `f32` values (every light's), the sign of `N.(x -

@@ -115,6 +115,18 @@ pub trait Shader {
     fn diffuse_albedo(&self) -> Option<DVec3> {
         None
     }
+
+    /// A vector `a` such that [`eval`](Self::eval) is exactly 0 for every
+    /// light in the plane through the shading point perpendicular to `a`
+    /// (`a . (x - p) = 0` exactly, for `a` as returned). The cut then
+    /// settles a node whose lights all lie exactly in that plane as 0
+    /// without bounding it (lights on a tilted roof, seen from a point of
+    /// the roof). [`Lambert`](crate::Lambert) returns the given normal; the
+    /// default, `None`, claims nothing.
+    fn horizon(&self, surface: &Surface) -> Option<Vec3> {
+        let _ = surface;
+        None
+    }
 }
 
 /// Marker for shaders whose result does not depend on the view direction
@@ -172,6 +184,13 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
     #[inline]
     fn diffuse_albedo(&self) -> Option<DVec3> {
         Some(self.first.diffuse_albedo()? + self.second.diffuse_albedo()?)
+    }
+
+    /// Both terms vanish in the same plane.
+    #[inline]
+    fn horizon(&self, surface: &Surface) -> Option<Vec3> {
+        let a = self.first.horizon(surface)?;
+        (self.second.horizon(surface)? == a).then_some(a)
     }
 }
 

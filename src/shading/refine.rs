@@ -11,7 +11,7 @@ use super::threshold::Threshold;
 use crate::geometry::Surface;
 use crate::numeric::{CompensatedSum, SUM_SLACK};
 use crate::shader::Shader;
-use crate::tree::{LightTree, Node};
+use crate::tree::{LightTree, NO_PLANE, Node};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 
 /// One shading call's state: what it reads (tree, shader, the point), the
@@ -40,6 +40,11 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     /// answered partial.
     small_partials: u32,
     pub(crate) point_queries: u32,
+    /// The shader's [`horizon`](Shader::horizon) at this point.
+    horizon: Option<Vec3>,
+    /// The last plane asked about and whether it is the tangent plane
+    /// (a coplanar node's descendants share its plane).
+    tangent_plane: (u32, bool),
 }
 
 /// How the error list's loop ended.
@@ -84,6 +89,8 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             decisive_answers: 0,
             small_partials: 0,
             point_queries: 0,
+            horizon: shader.horizon(surface),
+            tangent_plane: (NO_PLANE, false),
         }
     }
 
@@ -313,6 +320,14 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             // ball holds the shading point; no query is needed.
             return None;
         }
+        if let Some(plane) = self.tree.node_plane(index)
+            && self.in_tangent_plane(plane)
+        {
+            // Every light lies exactly in the tangent plane, where the
+            // shader's model is exactly 0: settled without a bound.
+            self.nodes += 1;
+            return None;
+        }
         let seen = if visible || V::ALWAYS_VISIBLE {
             Seen::Visible
         } else {
@@ -353,6 +368,22 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             return None;
         }
         Some(entry)
+    }
+
+    /// Whether the lights of plane `plane` lie exactly in the tangent plane
+    /// of the shader's [`horizon`](Shader::horizon) (never without one).
+    #[inline]
+    fn in_tangent_plane(&mut self, plane: u32) -> bool {
+        let Some(normal) = self.horizon else {
+            return false;
+        };
+        if self.tangent_plane.0 != plane {
+            let tangent = self
+                .tree
+                .plane_is_tangent(plane, self.surface.point, normal);
+            self.tangent_plane = (plane, tangent);
+        }
+        self.tangent_plane.1
     }
 
     /// One light's exact contribution, times `weight`, added to the settled

@@ -49,6 +49,15 @@ impl LightTree {
 /// `2^-k` say) are halved at the median of their longest axis instead, which
 /// needs at most `log2(n)` more levels, so leaves stay small however deep
 /// the clustering.
+///
+/// The build also records each node whose lights lie *exactly* in one
+/// tilted plane (decided in exact integer arithmetic on the `f32`
+/// coordinates; nodes of fewer than 8 lights, or whose box is flat along an
+/// axis, are not examined): a shading point lying in that plane, with a
+/// normal exactly across it, receives exactly nothing from such a node
+/// under Lambert's model (see [`Shader::horizon`](crate::Shader::horizon)),
+/// and the cut settles it without walking its lights. Scenes without such
+/// planes store nothing for them.
 #[derive(Clone, Copy, Debug)]
 #[must_use]
 pub struct TreeBuilder {
@@ -113,6 +122,8 @@ impl TreeBuilder {
             lights: Vec::new(),
             order: Vec::new(),
             depth: 0,
+            planes: Vec::new(),
+            node_planes: Vec::new(),
         };
         if n == 0 {
             return Ok(tree);
@@ -166,6 +177,7 @@ impl TreeBuilder {
             i += 1;
         }
         tree.nodes.shrink_to_fit();
+        super::plane::record_planes(&mut tree);
         Ok(tree)
     }
 }

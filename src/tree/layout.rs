@@ -167,9 +167,27 @@ pub struct LightTree {
     pub(crate) lights: Vec<PointLight>,
     pub(crate) order: Vec<u32>,
     pub(crate) depth: u32,
+    /// Per recorded plane: three lights (leaf order) spanning it.
+    pub(crate) planes: Vec<[u32; 3]>,
+    /// Per node, the plane all its lights lie in exactly (an index into
+    /// `planes`) or [`NO_PLANE`]; empty when no plane was recorded.
+    pub(crate) node_planes: Vec<u32>,
 }
 
+/// A node whose lights are not known to lie in one plane.
+pub(crate) const NO_PLANE: u32 = u32::MAX;
+
 impl LightTree {
+    /// The plane all lights of node `index` lie in exactly, if one was
+    /// recorded.
+    #[inline]
+    pub(crate) fn node_plane(&self, index: usize) -> Option<u32> {
+        self.node_planes
+            .get(index)
+            .copied()
+            .filter(|&p| p != NO_PLANE)
+    }
+
     /// The nodes, root first; empty for an empty tree.
     #[inline]
     pub fn nodes(&self) -> &[Node] {
@@ -217,6 +235,8 @@ impl LightTree {
         self.nodes.capacity() * size_of::<Node>()
             + self.lights.capacity() * size_of::<PointLight>()
             + self.order.capacity() * size_of::<u32>()
+            + self.planes.capacity() * size_of::<[u32; 3]>()
+            + self.node_planes.capacity() * size_of::<u32>()
     }
 }
 

@@ -4,8 +4,10 @@
 mod build;
 mod layout;
 pub(crate) mod morton;
+mod plane;
 mod refit;
 mod validate;
 
 pub use build::TreeBuilder;
+pub(crate) use layout::NO_PLANE;
 pub use layout::{LightTree, Node};

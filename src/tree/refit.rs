@@ -35,6 +35,7 @@ impl LightTree {
             fresh.child_count = old.child_count;
             self.nodes[i] = fresh;
         }
+        super::plane::record_planes(self);
         Ok(())
     }
 }

@@ -1,0 +1,288 @@
+//! Coplanar nodes: nodes whose lights all lie exactly in one plane, found
+//! when the tree is built, so that a shading point lying in that plane with
+//! a normal exactly across it (lights on a tilted roof, shading the roof)
+//! is recognised as receiving exactly nothing from the whole node.
+//!
+//! Axis-aligned boxes already settle a plane perpendicular to an axis
+//! exactly (a box of zero thickness lies in its tangent plane); a tilted
+//! plane needs a statistic exact along its normal. Both tests here are
+//! exact: coordinates are `f32` values, which on a common power-of-two grid
+//! are integers; where they fit in [`GRID_BITS`] bits the determinants are
+//! computed in `i128` without rounding, and elsewhere no plane is recorded
+//! (the ordinary bounds apply, as for any node).
+
+use glam::{DVec3, Vec3};
+
+use super::layout::{LightTree, NO_PLANE};
+
+/// Bits of the integers coordinates become on a node's grid: differences
+/// take 41 bits, the plane's normal (a cross product of differences) 83,
+/// and its dot product with a difference (three products summed) under
+/// 126, within `i128`. The normal's cross product with a caller's normal
+/// (41-bit integers on their own grid) stays under 126 bits too.
+const GRID_BITS: i32 = 40;
+
+/// Nodes of fewer lights are not examined: a cut sums small nodes light by
+/// light soon enough.
+const MIN_LIGHTS: u32 = 8;
+
+/// Lights tried for a third point spanning the plane.
+const SEARCH: usize = 64;
+
+/// Integer coordinates of `f32`-valued points on the grid of spacing
+/// `2^e` with `e` chosen from their largest magnitude so that every
+/// coordinate is below `2^GRID_BITS` cells; `None` when a coordinate is not
+/// a whole number of cells (its exponent is too far below the largest).
+fn on_grid<const N: usize>(points: [DVec3; N]) -> Option<[[i64; 3]; N]> {
+    let largest = points
+        .iter()
+        .map(|p| p.abs().max_element())
+        .fold(0.0f64, f64::max);
+    if largest == 0.0 {
+        return Some([[0; 3]; N]);
+    }
+    // largest < 2^(exponent + 1); cells of 2^(exponent + 1 - GRID_BITS).
+    let exponent = ((largest.to_bits() >> 52) & 0x7ff) as i32 - 1023;
+    let scale = (2.0f64).powi(GRID_BITS - 1 - exponent);
+    if !scale.is_finite() || scale == 0.0 {
+        return None;
+    }
+    let mut out = [[0i64; 3]; N];
+    for (p, o) in points.iter().zip(&mut out) {
+        for k in 0..3 {
+            // A power-of-two scaling is exact away from overflow and
+            // underflow, both excluded by the range of `f32` values.
+            let v = p[k] * scale;
+            if v != v.trunc() || v.abs() >= (2.0f64).powi(GRID_BITS) {
+                return None;
+            }
+            o[k] = v as i64;
+        }
+    }
+    Some(out)
+}
+
+fn sub(a: [i64; 3], b: [i64; 3]) -> [i128; 3] {
+    [
+        i128::from(a[0]) - i128::from(b[0]),
+        i128::from(a[1]) - i128::from(b[1]),
+        i128::from(a[2]) - i128::from(b[2]),
+    ]
+}
+
+fn cross(u: [i128; 3], v: [i128; 3]) -> [i128; 3] {
+    [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ]
+}
+
+fn dot(u: [i128; 3], v: [i128; 3]) -> i128 {
+    u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+}
+
+/// Whether the `f32`-valued point `d` lies exactly in the plane through
+/// `a`, `b`, `c` (not collinear); `None` when the four do not fit one grid.
+fn coplanar(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> Option<bool> {
+    let [a, b, c, d] = on_grid([a, b, c, d])?;
+    // |cross| < 2^83 and |d - a| < 2^41: the sum stays under 2^126.
+    let normal = cross(sub(b, a), sub(c, a));
+    Some(dot(normal, sub(d, a)) == 0)
+}
+
+/// Three lights of `lights` spanning a plane that holds them all, exactly;
+/// `None` if they are collinear, not coplanar, or off every common grid.
+fn spanning_plane(tree: &LightTree, range: core::ops::Range<usize>) -> Option<[u32; 3]> {
+    let lights = &tree.lights[range.clone()];
+    let point = |k: usize| lights[k].position.as_dvec3();
+    let first = range.start;
+    let a = 0;
+    let b = (1..lights.len()).find(|&k| point(k) != point(a))?;
+    let grid = |k: usize| on_grid([point(a), point(b), point(k)]);
+    // Lights on a line (a row of lamps) span no plane; the search for a
+    // third point off the line gives up after a few.
+    let c = (b + 1..lights.len().min(b + 1 + SEARCH))
+        .find(|&k| grid(k).is_some_and(|[pa, pb, pc]| cross(sub(pb, pa), sub(pc, pa)) != [0; 3]))?;
+    for k in 1..lights.len() {
+        if coplanar(point(a), point(b), point(c), point(k)) != Some(true) {
+            return None;
+        }
+    }
+    Some([(first + a) as u32, (first + b) as u32, (first + c) as u32])
+}
+
+/// Whether the node's brightest channel's covariance is far from singular,
+/// so that its lights cannot all lie in one plane: a filter that spares
+/// most nodes the exact test (skipping a node only forgoes a shortcut).
+fn clearly_solid(node: &super::layout::Node) -> bool {
+    let k = node.intensity.max_position();
+    if node.intensity[k] <= 0.0 {
+        return false;
+    }
+    let [xx, yy, zz, xy, xz, yz] = node.channel_covariances[k].map(f64::from);
+    let det = xx * (yy * zz - yz * yz) - xy * (xy * zz - yz * xz) + xz * (xy * yz - yy * xz);
+    let trace = xx + yy + zz;
+    // Coplanar lights have a singular covariance; its stored entries are
+    // rounded to `f32` (relative 2^-24), which moves the determinant by
+    // far less than this.
+    det > SOLID * trace * trace * trace
+}
+
+/// See [`clearly_solid`].
+const SOLID: f64 = 1e-3;
+
+/// Records the plane of every node whose lights are exactly coplanar (a
+/// node's whole subtree shares its plane) unless its box is flat along an
+/// axis, which the box already settles. Examined from the root down,
+/// stopping at the first coplanar node of each path: `O(n depth)` in the
+/// worst case, far less where lights leave the plane early (a check fails
+/// at the first light off it).
+pub(super) fn record_planes(tree: &mut LightTree) {
+    tree.planes.clear();
+    tree.node_planes.clear();
+    if tree.nodes.is_empty() {
+        return;
+    }
+    let mut planes = vec![NO_PLANE; tree.nodes.len()];
+    let mut stack = vec![(0usize, NO_PLANE)];
+    while let Some((i, inherited)) = stack.pop() {
+        let node = tree.nodes[i];
+        let mut plane = inherited;
+        if plane == NO_PLANE
+            && node.light_count >= MIN_LIGHTS
+            && (node.aabb.max - node.aabb.min).min_element() > 0.0
+            && !clearly_solid(&node)
+            && let Some(triple) = spanning_plane(tree, node.lights())
+        {
+            tree.planes.push(triple);
+            plane = (tree.planes.len() - 1) as u32;
+        }
+        planes[i] = plane;
+        for child in node.children() {
+            stack.push((child, plane));
+        }
+    }
+    // Scenes without a tilted plane of lights keep no per-node table.
+    if !tree.planes.is_empty() {
+        tree.node_planes = planes;
+    }
+}
+
+impl LightTree {
+    /// Whether every light of the plane `plane` lies in the tangent plane
+    /// of `point` with normal `normal`: `point` lies exactly in the plane
+    /// and `normal` is exactly perpendicular to it. Then `normal . (x -
+    /// point) = 0` for every light `x` of a node with that plane.
+    pub(crate) fn plane_is_tangent(&self, plane: u32, point: DVec3, normal: Vec3) -> bool {
+        let [a, b, c] = self.planes[plane as usize].map(|k| self.lights[k as usize].position);
+        let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+        if coplanar(a, b, c, point) != Some(true) {
+            return false;
+        }
+        let (Some([pa, pb, pc]), Some([n])) = (on_grid([a, b, c]), on_grid([normal.as_dvec3()]))
+        else {
+            return false;
+        };
+        let across = cross(sub(pb, pa), sub(pc, pa));
+        let n = [i128::from(n[0]), i128::from(n[1]), i128::from(n[2])];
+        cross(across, n) == [0; 3]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::PointLight;
+
+    fn tree(points: impl Iterator<Item = Vec3>) -> LightTree {
+        let lights: Vec<PointLight> = points.map(|p| PointLight::new(p, Vec3::ONE)).collect();
+        LightTree::build(&lights).unwrap()
+    }
+
+    fn tilted(i: i32, j: i32) -> Vec3 {
+        Vec3::new(i as f32, j as f32, (2 * i - 3 * j) as f32 * 0.25)
+    }
+
+    #[test]
+    fn a_tilted_grid_is_one_plane() {
+        let t = tree((0..40 * 40).map(|k| tilted(k % 40, k / 40)));
+        assert_eq!(t.planes.len(), 1);
+        assert!((0..t.nodes.len()).all(|i| t.node_plane(i) == Some(0)));
+        // The plane holds (0, 0, 0); its normal is (-2, 3, 4) (any length,
+        // either sign), and no other.
+        let p = DVec3::ZERO;
+        assert!(t.plane_is_tangent(0, p, Vec3::new(-2.0, 3.0, 4.0)));
+        assert!(t.plane_is_tangent(0, p, Vec3::new(1.0, -1.5, -2.0)));
+        assert!(!t.plane_is_tangent(0, p, Vec3::new(-2.0, 3.0, 4.000_001)));
+        assert!(!t.plane_is_tangent(0, DVec3::new(0.0, 0.0, 1e-30), Vec3::new(-2.0, 3.0, 4.0)));
+    }
+
+    #[test]
+    fn one_light_an_ulp_off_the_plane_breaks_it() {
+        let mut points: Vec<Vec3> = (0..40 * 40).map(|k| tilted(k % 40, k / 40)).collect();
+        let z = &mut points[777].z;
+        *z = f32::from_bits(z.to_bits() + 1);
+        let t = tree(points.into_iter());
+        // The root and the nodes holding that light have no plane; the rest
+        // do.
+        assert_eq!(t.node_plane(0), None);
+        assert!((0..t.nodes.len()).any(|i| t.node_plane(i).is_some()));
+        let moved = t.order.iter().position(|&k| k == 777).unwrap();
+        for (i, n) in t.nodes.iter().enumerate() {
+            if n.lights().contains(&moved) {
+                assert_eq!(t.node_plane(i), None);
+            }
+        }
+    }
+
+    #[test]
+    fn a_refit_records_the_planes_anew() {
+        let points: Vec<Vec3> = (0..40 * 40).map(|k| tilted(k % 40, k / 40)).collect();
+        let mut t = tree(points.iter().copied());
+        let mut lights: Vec<PointLight> = points
+            .iter()
+            .map(|&p| PointLight::new(p, Vec3::ONE))
+            .collect();
+        lights[5].position.z += 0.5;
+        t.refit(&lights).unwrap();
+        assert_eq!(t.node_plane(0), None);
+        let flat: Vec<PointLight> = points
+            .iter()
+            .map(|&p| PointLight::new(p * 2.0, Vec3::ONE))
+            .collect();
+        t.refit(&flat).unwrap();
+        assert!((0..t.nodes.len()).all(|i| t.node_plane(i) == Some(0)));
+    }
+
+    #[test]
+    fn scattered_lights_and_flat_boxes_record_nothing() {
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        let mut r = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let t = tree((0..5000).map(|_| Vec3::new(r(), r(), r()) * 100.0));
+        assert!(t.planes.is_empty() && t.node_planes.is_empty());
+        // Lamps at one height: the boxes are flat, which settles their plane.
+        let t = tree((0..2000).map(|k| Vec3::new((k % 50) as f32, (k / 50) as f32, 6.0)));
+        assert!(t.planes.is_empty());
+    }
+
+    #[test]
+    fn coordinates_off_a_common_grid_are_not_claimed() {
+        // 2^-30 next to 2^20: no 40-bit grid holds both.
+        assert!(
+            on_grid([
+                DVec3::new(1048576.0, 0.0, 0.0),
+                DVec3::splat(2f64.powi(-30))
+            ])
+            .is_none()
+        );
+        // Whole numbers of one power-of-two cell, in proportion.
+        let [o] = on_grid([DVec3::new(3.0, -1.0, 0.5)]).unwrap();
+        assert!(o[0] == -3 * o[1] && o[1] == -2 * o[2] && o[2] > 0);
+    }
+}
