@@ -185,8 +185,8 @@ impl Threshold {
     /// 1 ([`ShadeError::InvalidBand`] otherwise). Measured on a street-light
     /// city along a scanline of 100,000 points (`cargo run --release
     /// --example seams`), band 2 makes the largest jump of the relative
-    /// error 160 to 380 times smaller at thresholds of 1% to 20%, with about
-    /// 0.55 times the evaluations (the nested intervals meet the target
+    /// error 120 to 700 times smaller at thresholds of 1% to 20%, with about
+    /// 0.65 times the evaluations (the nested intervals meet the target
     /// sooner) and about twice the time; on scanlines whose tangent plane
     /// cuts a sphere of lights, 50 to 1,350 times smaller at 100,000 points,
     /// and every remaining jump shrinks about tenfold when the points are
