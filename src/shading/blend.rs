@@ -272,14 +272,27 @@ impl Nesting {
     /// lies outside any), compensated if `EXACT`.
     #[inline]
     fn add<const EXACT: bool>(&mut self, frame: u32, lo: DVec3, hi: DVec3, magnitude: &mut DVec3) {
-        let (sum_lo, sum_hi) = if frame == NO_PARENT {
-            (&mut self.top_lo, &mut self.top_hi)
-        } else {
-            let f = &mut self.frames[frame as usize];
-            (&mut f.sum_lo, &mut f.sum_hi)
-        };
+        let (sum_lo, sum_hi) = self.sums(frame, false);
         accumulate::<EXACT>(sum_lo, sum_hi, lo, hi);
         *magnitude += lo.abs() + hi.abs();
+    }
+
+    /// The accumulators of frame `frame` (or of what lies outside any):
+    /// its fixed terms (see [`expand`]) or its running sums.
+    #[inline]
+    fn sums(&mut self, frame: u32, fixed: bool) -> (&mut CompensatedSum, &mut CompensatedSum) {
+        match (frame == NO_PARENT, fixed) {
+            (true, true) => (&mut self.top_fixed_lo, &mut self.top_fixed_hi),
+            (true, false) => (&mut self.top_lo, &mut self.top_hi),
+            (false, true) => {
+                let f = &mut self.frames[frame as usize];
+                (&mut f.fixed_lo, &mut f.fixed_hi)
+            }
+            (false, false) => {
+                let f = &mut self.frames[frame as usize];
+                (&mut f.sum_lo, &mut f.sum_hi)
+            }
+        }
     }
 
     /// Sets every accumulator to its fixed terms (see [`expand`]).
@@ -296,14 +309,8 @@ impl Nesting {
     /// lies outside any).
     #[inline]
     fn add_fixed(&mut self, frame: u32, lo: DVec3, hi: DVec3) {
-        let (sum_lo, sum_hi) = if frame == NO_PARENT {
-            (&mut self.top_fixed_lo, &mut self.top_fixed_hi)
-        } else {
-            let f = &mut self.frames[frame as usize];
-            (&mut f.fixed_lo, &mut f.fixed_hi)
-        };
-        sum_lo.add(lo);
-        sum_hi.add(hi);
+        let (sum_lo, sum_hi) = self.sums(frame, true);
+        accumulate::<true>(sum_lo, sum_hi, lo, hi);
         self.fixed_magnitude += lo.abs() + hi.abs();
     }
 
@@ -457,11 +464,11 @@ impl Ramp {
 }
 
 /// The level at which the error list stopped, for the per-node target
-/// (whose excess does not depend on the blend): between the key of the
-/// last refinement (where the list would have stopped one step earlier)
-/// and the largest key left, in proportion to where the excess over the
-/// target crossed zero, so that it is continuous where the stopping step
-/// changes.
+/// (whose excess does not depend on the blend) and the batch call's shared
+/// cuts: between the key of the last refinement (where the list would have
+/// stopped one step earlier) and the largest key left, in proportion to
+/// where the excess over the target crossed zero, so that it is continuous
+/// where the stopping step changes.
 pub(crate) fn level(last_step: Option<(f64, f64)>, after: f64, top: f64) -> f64 {
     match last_step {
         Some((before, key)) if before > 0.0 && before.is_finite() => {

@@ -128,12 +128,13 @@ impl<'t, S: Shader> Shading<'t, S> {
         let interpolating = threshold.interpolation().is_some();
         let outcome = cut.run(list, &threshold, interpolating.then_some(&mut *nesting));
         let unbounded = list.has_unbounded();
-        let (estimate, error) = list.resum();
-        let (mut radiance, mut bound) = (cut.settled.value() + estimate, reported_bound(error));
-        if interpolating && !unbounded {
+        let (mut radiance, mut bound) = if interpolating && !unbounded {
             // Each refined node's interval intersected with its children's.
-            (radiance, bound) = outcome.confirmed.unwrap_or_else(|| nesting.fold(list));
-        }
+            outcome.confirmed.unwrap_or_else(|| nesting.fold(list))
+        } else {
+            let (estimate, error) = list.resum();
+            (cut.settled.value() + estimate, reported_bound(error))
+        };
         if let (Some(band), Stop::ThresholdMet) = (threshold.interpolation(), outcome.stop) {
             let top = list.largest();
             let after = threshold.excess(radiance, bound, top);
