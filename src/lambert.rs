@@ -313,7 +313,7 @@ impl Shader for Lambert {
     fn prepare(&self, _surface: &Surface) {}
 
     /// The given normal: [`eval`](Shader::eval) takes the exact sign of
-    /// `N . (x - p)` and returns 0 where it is 0.
+    /// `N . (x - p)` and returns 0 where it is at most 0.
     #[inline]
     fn horizon(&self, surface: &Surface) -> Option<Vec3> {
         Some(surface.given_normal)

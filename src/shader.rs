@@ -117,12 +117,13 @@ pub trait Shader {
     }
 
     /// A vector `a` such that [`eval`](Self::eval) is exactly 0 for every
-    /// light in the plane through the shading point perpendicular to `a`
-    /// (`a . (x - p) = 0` exactly, for `a` as returned). The cut then
-    /// settles a node whose lights all lie exactly in that plane as 0
-    /// without bounding it (lights on a tilted roof, seen from a point of
-    /// the roof). [`Lambert`](crate::Lambert) returns the given normal; the
-    /// default, `None`, claims nothing.
+    /// light at or below the plane through the shading point perpendicular
+    /// to `a` (`a . (x - p) <= 0` exactly, for `a` as returned). The cut
+    /// then settles as 0, without bounding it, a node whose lights all lie
+    /// exactly in one plane parallel to that one and not above it (lights
+    /// on a tilted roof, seen from a point of the roof).
+    /// [`Lambert`](crate::Lambert) returns the given normal; the default,
+    /// `None`, claims nothing.
     fn horizon(&self, surface: &Surface) -> Option<Vec3> {
         let _ = surface;
         None
@@ -186,7 +187,7 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         Some(self.first.diffuse_albedo()? + self.second.diffuse_albedo()?)
     }
 
-    /// Both terms vanish in the same plane.
+    /// Both terms vanish below the same plane.
     #[inline]
     fn horizon(&self, surface: &Surface) -> Option<Vec3> {
         let a = self.first.horizon(surface)?;

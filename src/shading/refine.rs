@@ -42,9 +42,9 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     pub(crate) point_queries: u32,
     /// The shader's [`horizon`](Shader::horizon) at this point.
     horizon: Option<Vec3>,
-    /// The last plane asked about and whether it is the tangent plane
-    /// (a coplanar node's descendants share its plane).
-    tangent_plane: (u32, bool),
+    /// The last plane asked about and whether it lies at or below the
+    /// tangent plane (a coplanar node's descendants share its plane).
+    dark_plane: (u32, bool),
 }
 
 /// How the error list's loop ended.
@@ -90,7 +90,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             small_partials: 0,
             point_queries: 0,
             horizon: shader.horizon(surface),
-            tangent_plane: (NO_PLANE, false),
+            dark_plane: (NO_PLANE, false),
         }
     }
 
@@ -321,9 +321,9 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             return None;
         }
         if let Some(plane) = self.tree.node_plane(index)
-            && self.in_tangent_plane(plane)
+            && self.below_horizon(plane)
         {
-            // Every light lies exactly in the tangent plane, where the
+            // Every light lies at or below the tangent plane, where the
             // shader's model is exactly 0: settled without a bound.
             self.nodes += 1;
             return None;
@@ -370,20 +370,20 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         Some(entry)
     }
 
-    /// Whether the lights of plane `plane` lie exactly in the tangent plane
-    /// of the shader's [`horizon`](Shader::horizon) (never without one).
+    /// Whether the lights of plane `plane` lie at or below the plane of the
+    /// shader's [`horizon`](Shader::horizon) (never without one).
     #[inline]
-    fn in_tangent_plane(&mut self, plane: u32) -> bool {
+    fn below_horizon(&mut self, plane: u32) -> bool {
         let Some(normal) = self.horizon else {
             return false;
         };
-        if self.tangent_plane.0 != plane {
-            let tangent = self
+        if self.dark_plane.0 != plane {
+            let dark = self
                 .tree
-                .plane_is_tangent(plane, self.surface.point, normal);
-            self.tangent_plane = (plane, tangent);
+                .plane_at_or_below(plane, self.surface.point, normal);
+            self.dark_plane = (plane, dark);
         }
-        self.tangent_plane.1
+        self.dark_plane.1
     }
 
     /// One light's exact contribution, times `weight`, added to the settled

@@ -53,10 +53,11 @@ impl LightTree {
 /// The build also records each node whose lights lie *exactly* in one
 /// tilted plane (decided in exact integer arithmetic on the `f32`
 /// coordinates; nodes of fewer than 8 lights, or whose box is flat along an
-/// axis, are not examined): a shading point lying in that plane, with a
-/// normal exactly across it, receives exactly nothing from such a node
-/// under Lambert's model (see [`Shader::horizon`](crate::Shader::horizon)),
-/// and the cut settles it without walking its lights. Scenes without such
+/// axis, are not examined): a shading point whose tangent plane is exactly
+/// parallel to that plane, with the lights at or below it, receives exactly
+/// nothing from such a node under Lambert's model (see
+/// [`Shader::horizon`](crate::Shader::horizon)), and the cut settles it
+/// without walking its lights. Scenes without such
 /// planes store nothing for them.
 #[derive(Clone, Copy, Debug)]
 #[must_use]

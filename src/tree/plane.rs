@@ -1,7 +1,8 @@
 //! Coplanar nodes: nodes whose lights all lie exactly in one plane, found
-//! when the tree is built, so that a shading point lying in that plane with
-//! a normal exactly across it (lights on a tilted roof, shading the roof)
-//! is recognised as receiving exactly nothing from the whole node.
+//! when the tree is built, so that a shading point whose tangent plane is
+//! exactly parallel to that plane and not below it (lights on a tilted
+//! roof, shading the roof or a point just above it) is recognised as
+//! receiving exactly nothing from the whole node.
 //!
 //! Axis-aligned boxes already settle a plane perpendicular to an axis
 //! exactly (a box of zero thickness lies in its tangent plane); a tilted
@@ -14,6 +15,7 @@
 use glam::{DVec3, Vec3};
 
 use super::layout::{LightTree, NO_PLANE};
+use crate::numeric::dot_of_difference;
 
 /// Bits of the integers coordinates become on a node's grid: differences
 /// take 41 bits, the plane's normal (a cross product of differences) 83,
@@ -170,23 +172,21 @@ pub(super) fn record_planes(tree: &mut LightTree) {
 }
 
 impl LightTree {
-    /// Whether every light of the plane `plane` lies in the tangent plane
-    /// of `point` with normal `normal`: `point` lies exactly in the plane
-    /// and `normal` is exactly perpendicular to it. Then `normal . (x -
-    /// point) = 0` for every light `x` of a node with that plane.
-    pub(crate) fn plane_is_tangent(&self, plane: u32, point: DVec3, normal: Vec3) -> bool {
+    /// Whether every light of the plane `plane` lies at or below the
+    /// tangent plane of `point` with normal `normal`: `normal` is exactly
+    /// perpendicular to the lights' plane, so `normal . (x - point)` takes
+    /// one value over the plane (that of a spanning light, whose sign is
+    /// exact), and that value is at most 0.
+    pub(crate) fn plane_at_or_below(&self, plane: u32, point: DVec3, normal: Vec3) -> bool {
         let [a, b, c] = self.planes[plane as usize].map(|k| self.lights[k as usize].position);
         let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
-        if coplanar(a, b, c, point) != Some(true) {
-            return false;
-        }
         let (Some([pa, pb, pc]), Some([n])) = (on_grid([a, b, c]), on_grid([normal.as_dvec3()]))
         else {
             return false;
         };
         let across = cross(sub(pb, pa), sub(pc, pa));
         let n = [i128::from(n[0]), i128::from(n[1]), i128::from(n[2])];
-        cross(across, n) == [0; 3]
+        cross(across, n) == [0; 3] && dot_of_difference(normal.as_dvec3(), a, point) <= 0.0
     }
 }
 
@@ -211,11 +211,16 @@ mod tests {
         assert!((0..t.nodes.len()).all(|i| t.node_plane(i) == Some(0)));
         // The plane holds (0, 0, 0); its normal is (-2, 3, 4) (any length,
         // either sign), and no other.
-        let p = DVec3::ZERO;
-        assert!(t.plane_is_tangent(0, p, Vec3::new(-2.0, 3.0, 4.0)));
-        assert!(t.plane_is_tangent(0, p, Vec3::new(1.0, -1.5, -2.0)));
-        assert!(!t.plane_is_tangent(0, p, Vec3::new(-2.0, 3.0, 4.000_001)));
-        assert!(!t.plane_is_tangent(0, DVec3::new(0.0, 0.0, 1e-30), Vec3::new(-2.0, 3.0, 4.0)));
+        let (p, n) = (DVec3::ZERO, Vec3::new(-2.0, 3.0, 4.0));
+        assert!(t.plane_at_or_below(0, p, n));
+        assert!(t.plane_at_or_below(0, p, -0.5 * n));
+        assert!(!t.plane_at_or_below(0, p, Vec3::new(-2.0, 3.0, 4.000_001)));
+        // A point a hair above the plane along `n` sees it below; a hair
+        // below, above (facing `n`) or below (facing `-n`).
+        let (up, down) = (DVec3::new(0.0, 0.0, 1e-30), DVec3::new(0.0, 0.0, -1e-30));
+        assert!(t.plane_at_or_below(0, up, n));
+        assert!(!t.plane_at_or_below(0, down, n));
+        assert!(t.plane_at_or_below(0, down, -n));
     }
 
     #[test]
