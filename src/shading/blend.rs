@@ -249,7 +249,7 @@ impl Nesting {
     /// what the list settled, each refined node's interval intersected with
     /// its children's.
     pub(crate) fn fold(&mut self, list: &ErrorList) -> (DVec3, DVec3) {
-        self.reset_sums();
+        self.reset_sums(false);
         let mut magnitude = DVec3::ZERO;
         for (e, slot) in list.waiting() {
             let (lo, hi) = bounds(interval(e));
@@ -258,14 +258,21 @@ impl Nesting {
         self.fold_frames::<true>(magnitude, &Ramp::FULL)
     }
 
-    /// Sets every accumulator to the exact values settled under it.
-    fn reset_sums(&mut self) {
+    /// Starts every accumulator from its fixed terms (see [`expand`]) if
+    /// `fixed`, else from the exact values settled under it.
+    fn reset_sums(&mut self, fixed: bool) {
         for f in &mut self.frames {
-            f.sum_lo = f.settled;
-            f.sum_hi = f.settled;
+            (f.sum_lo, f.sum_hi) = if fixed {
+                (f.fixed_lo, f.fixed_hi)
+            } else {
+                (f.settled, f.settled)
+            };
         }
-        self.top_lo = self.top_settled;
-        self.top_hi = self.top_settled;
+        (self.top_lo, self.top_hi) = if fixed {
+            (self.top_fixed_lo, self.top_fixed_hi)
+        } else {
+            (self.top_settled, self.top_settled)
+        };
     }
 
     /// Adds an interval to the accumulators of frame `frame` (or of what
@@ -293,16 +300,6 @@ impl Nesting {
                 (&mut f.sum_lo, &mut f.sum_hi)
             }
         }
-    }
-
-    /// Sets every accumulator to its fixed terms (see [`expand`]).
-    fn reset_to_fixed(&mut self) {
-        for f in &mut self.frames {
-            f.sum_lo = f.fixed_lo;
-            f.sum_hi = f.fixed_hi;
-        }
-        self.top_lo = self.top_fixed_lo;
-        self.top_hi = self.top_fixed_hi;
     }
 
     /// Adds an interval to the fixed terms of frame `frame` (or of what
@@ -710,7 +707,7 @@ fn fold_at<const EXACT: bool>(
     items: &mut [Item],
     ramp: &Ramp,
 ) -> (DVec3, DVec3) {
-    nesting.reset_to_fixed();
+    nesting.reset_sums(true);
     let mut magnitude = nesting.fixed_magnitude;
     for it in items.iter_mut() {
         it.sum_lo = it.fixed_lo;
