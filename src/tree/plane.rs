@@ -14,7 +14,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::layout::{LightTree, NO_PLANE};
+use super::layout::{LightTree, NO_PLANE, Node};
 use crate::numeric::dot_of_difference;
 
 /// Bits of the integers coordinates become on a node's grid: differences
@@ -31,35 +31,57 @@ const MIN_LIGHTS: u32 = 8;
 /// Lights tried for a third point spanning the plane.
 const SEARCH: usize = 64;
 
-/// Integer coordinates of `f32`-valued points on the grid of spacing
-/// `2^e` with `e` chosen from their largest magnitude so that every
-/// coordinate is below `2^GRID_BITS` cells; `None` when a coordinate is not
-/// a whole number of cells (its exponent is too far below the largest).
+/// The grid of spacing `2^e`, `e` chosen from the largest magnitude of the
+/// coordinates to be placed on it so that every one is below
+/// `2^GRID_BITS` cells.
+#[derive(Clone, Copy, Debug)]
+struct Grid {
+    /// `2^-e`.
+    scale: f64,
+}
+
+impl Grid {
+    /// The grid for coordinates of magnitude at most `largest` (an `f32`
+    /// value); `None` where `2^-e` leaves the `f64` range.
+    fn for_largest(largest: f64) -> Option<Self> {
+        if largest == 0.0 {
+            return Some(Self { scale: 1.0 });
+        }
+        // largest < 2^(exponent + 1); cells of 2^(exponent + 1 - GRID_BITS).
+        let exponent = ((largest.to_bits() >> 52) & 0x7ff) as i32 - 1023;
+        let scale = (2.0f64).powi(GRID_BITS - 1 - exponent);
+        (scale.is_finite() && scale > 0.0).then_some(Self { scale })
+    }
+
+    /// The integer coordinates of an `f32`-valued point, `None` when a
+    /// coordinate is not a whole number of cells (its exponent is too far
+    /// below the largest) or exceeds the grid.
+    fn point(&self, p: DVec3) -> Option<[i64; 3]> {
+        let mut out = [0i64; 3];
+        for (k, o) in out.iter_mut().enumerate() {
+            // A power-of-two scaling is exact away from overflow and
+            // underflow, both excluded by the range of `f32` values.
+            let v = p[k] * self.scale;
+            if v != v.trunc() || v.abs() >= (2.0f64).powi(GRID_BITS) {
+                return None;
+            }
+            *o = v as i64;
+        }
+        Some(out)
+    }
+}
+
+/// Integer coordinates of `f32`-valued points on the [`Grid`] of their
+/// largest magnitude, or `None`.
 fn on_grid<const N: usize>(points: [DVec3; N]) -> Option<[[i64; 3]; N]> {
     let largest = points
         .iter()
         .map(|p| p.abs().max_element())
         .fold(0.0f64, f64::max);
-    if largest == 0.0 {
-        return Some([[0; 3]; N]);
-    }
-    // largest < 2^(exponent + 1); cells of 2^(exponent + 1 - GRID_BITS).
-    let exponent = ((largest.to_bits() >> 52) & 0x7ff) as i32 - 1023;
-    let scale = (2.0f64).powi(GRID_BITS - 1 - exponent);
-    if !scale.is_finite() || scale == 0.0 {
-        return None;
-    }
+    let grid = Grid::for_largest(largest)?;
     let mut out = [[0i64; 3]; N];
     for (p, o) in points.iter().zip(&mut out) {
-        for k in 0..3 {
-            // A power-of-two scaling is exact away from overflow and
-            // underflow, both excluded by the range of `f32` values.
-            let v = p[k] * scale;
-            if v != v.trunc() || v.abs() >= (2.0f64).powi(GRID_BITS) {
-                return None;
-            }
-            o[k] = v as i64;
-        }
+        *o = grid.point(*p)?;
     }
     Some(out)
 }
@@ -84,40 +106,40 @@ fn dot(u: [i128; 3], v: [i128; 3]) -> i128 {
     u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 }
 
-/// Whether the `f32`-valued point `d` lies exactly in the plane through
-/// `a`, `b`, `c` (not collinear); `None` when the four do not fit one grid.
-fn coplanar(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> Option<bool> {
-    let [a, b, c, d] = on_grid([a, b, c, d])?;
-    // |cross| < 2^83 and |d - a| < 2^41: the sum stays under 2^126.
-    let normal = cross(sub(b, a), sub(c, a));
-    Some(dot(normal, sub(d, a)) == 0)
-}
-
-/// Three lights of `lights` spanning a plane that holds them all, exactly;
-/// `None` if they are collinear, not coplanar, or off every common grid.
-fn spanning_plane(tree: &LightTree, range: core::ops::Range<usize>) -> Option<[u32; 3]> {
-    let lights = &tree.lights[range.clone()];
-    let point = |k: usize| lights[k].position.as_dvec3();
+/// Three lights of `node` spanning a plane that holds them all, exactly;
+/// `None` if they are collinear, not coplanar, or off the grid of the
+/// node's box (which bounds every light's coordinates).
+fn spanning_plane(tree: &LightTree, node: &Node) -> Option<[u32; 3]> {
+    let range = node.lights();
     let first = range.start;
-    let a = 0;
-    let b = (1..lights.len()).find(|&k| point(k) != point(a))?;
-    let grid = |k: usize| on_grid([point(a), point(b), point(k)]);
+    let lights = &tree.lights[range];
+    let grid = Grid::for_largest(f64::from(
+        node.aabb.min.abs().max(node.aabb.max.abs()).max_element(),
+    ))?;
+    let point = |k: usize| grid.point(lights[k].position.as_dvec3());
+    let a = point(0)?;
+    let b = (1..lights.len()).find(|&k| point(k).is_some_and(|p| p != a))?;
+    let ab = sub(point(b)?, a);
     // Lights on a line (a row of lamps) span no plane; the search for a
     // third point off the line gives up after a few.
-    let c = (b + 1..lights.len().min(b + 1 + SEARCH))
-        .find(|&k| grid(k).is_some_and(|[pa, pb, pc]| cross(sub(pb, pa), sub(pc, pa)) != [0; 3]))?;
+    let (c, normal) = (b + 1..lights.len().min(b + 1 + SEARCH)).find_map(|k| {
+        let normal = cross(ab, sub(point(k)?, a));
+        (normal != [0; 3]).then_some((k, normal))
+    })?;
+    // |normal| < 2^83 and |d - a| < 2^41 per coordinate: the dot product
+    // stays under 2^126.
     for k in 1..lights.len() {
-        if coplanar(point(a), point(b), point(c), point(k)) != Some(true) {
+        if dot(normal, sub(point(k)?, a)) != 0 {
             return None;
         }
     }
-    Some([(first + a) as u32, (first + b) as u32, (first + c) as u32])
+    Some([first as u32, (first + b) as u32, (first + c) as u32])
 }
 
 /// Whether the node's brightest channel's covariance is far from singular,
 /// so that its lights cannot all lie in one plane: a filter that spares
 /// most nodes the exact test (skipping a node only forgoes a shortcut).
-fn clearly_solid(node: &super::layout::Node) -> bool {
+fn clearly_solid(node: &Node) -> bool {
     let k = node.intensity.max_position();
     if node.intensity[k] <= 0.0 {
         return false;
@@ -155,7 +177,7 @@ pub(super) fn record_planes(tree: &mut LightTree) {
             && node.light_count >= MIN_LIGHTS
             && (node.aabb.max - node.aabb.min).min_element() > 0.0
             && !clearly_solid(&node)
-            && let Some(triple) = spanning_plane(tree, node.lights())
+            && let Some(triple) = spanning_plane(tree, &node)
         {
             tree.planes.push(triple);
             plane = (tree.planes.len() - 1) as u32;
@@ -262,14 +284,17 @@ mod tests {
 
     #[test]
     fn scattered_lights_and_flat_boxes_record_nothing() {
-        let mut s = 0x9E37_79B9_7F4A_7C15u64;
-        let mut r = move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
-        let t = tree((0..5000).map(|_| Vec3::new(r(), r(), r()) * 100.0));
+        // A Kronecker sequence: well spread, no four consecutive points in
+        // a plane.
+        let spread = |k: f64, alpha: f64| ((k * alpha).fract() * 100.0) as f32;
+        let t = tree((0..5000).map(|k| {
+            let k = f64::from(k);
+            Vec3::new(
+                spread(k, 0.618_034),
+                spread(k, 0.414_214),
+                spread(k, 0.732_051),
+            )
+        }));
         assert!(t.planes.is_empty() && t.node_planes.is_empty());
         // Lamps at one height: the boxes are flat, which settles their plane.
         let t = tree((0..2000).map(|k| Vec3::new((k % 50) as f32, (k / 50) as f32, 6.0)));
