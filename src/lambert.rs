@@ -199,14 +199,17 @@ impl BoundKind {
 /// `S_k` are within `f32::EPSILON tr(S_k)` of the `f64` ones, moving each
 /// quadratic form by at most `3 f32::EPSILON tr(S_k)`, and the degree-2 term
 /// by `(15 * 3 + 3 + 6 * 3) / 2 = 33` of those), and by
-/// `n f64::EPSILON (sigma + 18 sigma^2)` for the build's `f64` sums of the
-/// `n` members' moments (each entry within `n 2^-53 I_k R^j` of exact);
+/// `2 delta (sigma + 18 sigma^2)` for the build's `f64` sums of the
+/// members' moments (each entry within `delta I_k R^j` of exact,
+/// `delta` the node's [`Node::moment_error`]);
 /// its remainder by [`SERIES_SLACK`] as documented there. Stored diagonals
 /// of `S_k` and harmonic norms are rounded upward at build time, after an
 /// allowance for their `f64` sums. The Taylor bound widens its estimate by
 /// [`SECOND_ORDER_SLACK`] of its terms' magnitudes, by [`COS_SLACK`] times
 /// `I_k / D^2` for the cosine, and by `f32::EPSILON` of the first-order
-/// term; the quadratic forms of `S_k` by `f32::EPSILON * tr(S_k)`.
+/// term, and by the same `2 delta (sigma + 18 sigma^2)` as the series for
+/// the build's moment sums; the quadratic forms of `S_k` by
+/// `f32::EPSILON * tr(S_k)`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lambert {
     kd: DVec3,
@@ -506,9 +509,12 @@ impl Lambert {
         let remainder = scale * remainder_unit;
         // The cosine z carries an absolute error (up to COS_SLACK) that a
         // relative slack of |z| misses when z is near 0.
+        // The build's f64 moment sums, as for the series bound.
+        let sums = 2.0 * node.moment_error() * sd * (1.0 + 18.0 * sd);
         let rounding = SECOND_ORDER_SLACK * (scale * z.abs() + first_order.abs() + straddle)
             + COS_SLACK * scale
-            + f32::EPSILON as f64 * scale * grad_len * offset_lens;
+            + f32::EPSILON as f64 * scale * grad_len * offset_lens
+            + scale * sums;
         let lo2 = smooth - remainder - rounding;
         let hi2 = smooth + remainder + straddle + rounding;
         (lo2, hi2, Some(smooth + 0.5 * straddle))
@@ -631,7 +637,7 @@ fn series_width(
     remainder += tail.min(tail * ac + mu_prev * (hperp * g2));
 
     let remainder = remainder * (1.0 + SERIES_SLACK * inv_rho);
-    let sums = f64::from(node.light_count) * f64::EPSILON * sigma * (1.0 + 18.0 * sigma);
+    let sums = 2.0 * node.moment_error() * sigma * (1.0 + 18.0 * sigma);
     let slack = SERIES_SLACK * (1.0 + offset_lens + mu2)
         + f32::EPSILON as f64 * (offset_lens + 33.0 * mu2)
         + sums

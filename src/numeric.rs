@@ -94,11 +94,17 @@ pub const BUILD_LENGTH_SLACK: f64 = 8.0 * f64::EPSILON;
 /// (`16 * 2^-53`) covers it with margin.
 pub const DISTANCE_SLACK: f64 = 8.0 * f64::EPSILON;
 
-/// Absolute padding of the harmonic norms computed at build time, in units
-/// of `f64::EPSILON`, on top of one `f64::EPSILON` per member light, before
-/// they are rounded upward to `f32`.
+/// Absolute padding of harmonic norms computed from a node's members, in
+/// units of `f64::EPSILON`, on top of one `f64::EPSILON` per member light,
+/// before they are rounded upward to `f32`.
 ///
-/// A stored norm is `q = |C| / I_k` with `C` the `2l + 1` Schmidt
+/// The build tracks its own rounding (it merges moments bottom-up, with a
+/// certified error bound carried along) and adds twice this padding, so
+/// that a stored norm is never below the norm
+/// [`LightTree::validate`](crate::LightTree::validate) recomputes from the
+/// members directly, which is the computation analysed here.
+///
+/// A directly computed norm is `q = |C| / I_k` with `C` the `2l + 1` Schmidt
 /// semi-normalised solid-harmonic moments of degree `l` of the node's
 /// members, scaled by `1 / R` (so `|y / R| <= 1`). Each moment is a
 /// recursive `f64` sum of `n` terms; by Minkowski's inequality and

@@ -37,6 +37,15 @@ impl Aabb {
         }
     }
 
+    /// The smallest box holding this one and `other`.
+    #[must_use]
+    pub(crate) fn union(self, other: Self) -> Self {
+        Self {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
+    }
+
     /// Lowest and highest value of `dir . (x - origin)` over the box (its
     /// support function in `+dir` and `-dir`), computed in `f64` and widened
     /// outward by `relative_slack` times the magnitude of the coordinates

@@ -1,9 +1,12 @@
 //! Building the tree: an adaptive octree over point lights, and the node
 //! statistics that building and refitting share.
 
+use core::ops::{Add, Mul, Sub};
+
 use glam::{DVec3, Vec3};
 
 use super::layout::{LightTree, Node};
+use super::moments::Moments;
 use super::morton;
 use crate::geometry::Aabb;
 use crate::numeric::{BUILD_LENGTH_SLACK, HARMONIC_BUILD_PAD, round_up_f32};
@@ -109,9 +112,14 @@ impl TreeBuilder {
 
     /// Builds the tree.
     ///
-    /// The sort is linear; node statistics are computed from each node's
-    /// contiguous run of lights, `O(n * depth)` in sequential memory
-    /// accesses. Memory `O(n)`.
+    /// The sort is linear, and so are the node statistics: each leaf sums
+    /// its lights' moments (up to degree 5) once, and every other node
+    /// shifts its children's moments to its own centroid, with a certified
+    /// bound on the rounding carried along (see
+    /// [`Node::moment_error`](crate::Node::moment_error)). Only the radii
+    /// take a pass over each node's lights (`O(n * depth)` distance
+    /// checks, a few operations each), so that they stay tight. Memory
+    /// `O(n)`.
     ///
     /// # Errors
     /// [`BuildError`] for a light with a non-finite or out-of-range
@@ -157,16 +165,16 @@ impl TreeBuilder {
         tree.order = order;
 
         // Breadth-first: children of a node are appended together, so they
-        // are contiguous. `depths[i]` is node i's depth.
+        // are contiguous. `depths[i]` is node i's depth. The statistics
+        // follow, bottom-up.
         let mut depths: Vec<u32> = vec![0];
-        tree.nodes.push(node_stats(&tree.lights, 0..n));
+        tree.nodes.push(Node::covering(0..n));
         let mut i = 0;
         while i < tree.nodes.len() {
-            let node = tree.nodes[i];
+            let range = tree.nodes[i].lights();
             let depth = depths[i];
             tree.depth = tree.depth.max(depth);
-            if node.light_count as usize > self.max_leaf_lights && depth < self.max_depth {
-                let range = node.lights();
+            if range.len() > self.max_leaf_lights && depth < self.max_depth {
                 // The octree cell's occupied sub-cells at the first level
                 // where the codes differ; lights in one finest cell are
                 // halved at their median instead.
@@ -175,7 +183,6 @@ impl TreeBuilder {
                     None => median_split(
                         &mut tree.lights[range.clone()],
                         &mut tree.order[range.clone()],
-                        node.aabb,
                     ),
                 };
                 if groups.len() > 1 {
@@ -183,7 +190,7 @@ impl TreeBuilder {
                     tree.nodes[i].child_count = groups.len() as u32;
                     for g in groups {
                         let r = range.start + g.start..range.start + g.end;
-                        tree.nodes.push(node_stats(&tree.lights, r));
+                        tree.nodes.push(Node::covering(r));
                         depths.push(depth + 1);
                     }
                 }
@@ -191,6 +198,7 @@ impl TreeBuilder {
             i += 1;
         }
         tree.nodes.shrink_to_fit();
+        fill_statistics(&mut tree);
         super::plane::record_planes(&mut tree);
         Ok(tree)
     }
@@ -226,8 +234,10 @@ pub(super) fn check_lights(lights: &[PointLight]) -> Result<(), BuildError> {
 fn median_split(
     lights: &mut [PointLight],
     order: &mut [u32],
-    aabb: Aabb,
 ) -> smallvec::SmallVec<[core::ops::Range<usize>; 8]> {
+    let aabb = lights
+        .iter()
+        .fold(Aabb::EMPTY, |b, l| b.union_point(l.position));
     let extent = aabb.max - aabb.min;
     let mut out = smallvec::SmallVec::new();
     if extent.max_element() <= 0.0 {
@@ -305,39 +315,45 @@ pub(crate) const HARMONIC_NORM_SQ: [f64; HARMONIC_COUNT] = {
 /// every product the crate forms).
 #[inline]
 pub(crate) fn solid_harmonics(y: DVec3) -> [f64; HARMONIC_COUNT] {
-    let (x, yy, z) = (y.x, y.y, y.z);
-    let r2 = y.length_squared();
+    solid_harmonics_of(y.x, y.y, y.z)
+}
+
+/// [`solid_harmonics`] for any ring: `f64` values, or polynomials to read
+/// off each harmonic's monomials.
+#[inline]
+pub(crate) fn solid_harmonics_of<T>(x: T, y: T, z: T) -> [T; HARMONIC_COUNT]
+where
+    T: Copy + Add<Output = T> + Sub<Output = T> + Mul<Output = T> + Mul<f64, Output = T>,
+{
+    let r2 = x * x + y * y + z * z;
     let (z2, r4) = (z * z, r2 * r2);
     let z3 = z2 * z;
     // (x + i y)^m = c_m + i s_m.
-    let (c1, s1) = (x, yy);
-    let (c2, s2) = (c1 * x - s1 * yy, c1 * yy + s1 * x);
-    let (c3, s3) = (c2 * x - s2 * yy, c2 * yy + s2 * x);
-    let (c4, s4) = (c3 * x - s3 * yy, c3 * yy + s3 * x);
-    let (c5, s5) = (c4 * x - s4 * yy, c4 * yy + s4 * x);
-    let t30 = 0.5 * (5.0 * z3 - 3.0 * z * r2);
-    let t31 = 0.5 * (15.0 * z2 - 3.0 * r2);
-    let t32 = 15.0 * z;
-    let t33 = 15.0;
-    let t40 = 0.125 * (35.0 * z2 * z2 - 30.0 * z2 * r2 + 3.0 * r4);
-    let t41 = 0.5 * (35.0 * z3 - 15.0 * z * r2);
-    let t42 = 0.5 * (105.0 * z2 - 15.0 * r2);
-    let t43 = 105.0 * z;
-    let t44 = 105.0;
-    let t50 = 0.125 * (63.0 * z3 * z2 - 70.0 * z3 * r2 + 15.0 * z * r4);
-    let t51 = 0.125 * (315.0 * z2 * z2 - 210.0 * z2 * r2 + 15.0 * r4);
-    let t52 = 0.5 * (315.0 * z3 - 105.0 * z * r2);
-    let t53 = 0.5 * (945.0 * z2 - 105.0 * r2);
-    let t54 = 945.0 * z;
-    let t55 = 945.0;
+    let (c1, s1) = (x, y);
+    let (c2, s2) = (c1 * x - s1 * y, c1 * y + s1 * x);
+    let (c3, s3) = (c2 * x - s2 * y, c2 * y + s2 * x);
+    let (c4, s4) = (c3 * x - s3 * y, c3 * y + s3 * x);
+    let (c5, s5) = (c4 * x - s4 * y, c4 * y + s4 * x);
+    let t30 = (z3 * 5.0 - z * r2 * 3.0) * 0.5;
+    let t31 = (z2 * 15.0 - r2 * 3.0) * 0.5;
+    let t32 = z * 15.0;
+    let t40 = (z2 * z2 * 35.0 - z2 * r2 * 30.0 + r4 * 3.0) * 0.125;
+    let t41 = (z3 * 35.0 - z * r2 * 15.0) * 0.5;
+    let t42 = (z2 * 105.0 - r2 * 15.0) * 0.5;
+    let t43 = z * 105.0;
+    let t50 = (z3 * z2 * 63.0 - z3 * r2 * 70.0 + z * r4 * 15.0) * 0.125;
+    let t51 = (z2 * z2 * 315.0 - z2 * r2 * 210.0 + r4 * 15.0) * 0.125;
+    let t52 = (z3 * 315.0 - z * r2 * 105.0) * 0.5;
+    let t53 = (z2 * 945.0 - r2 * 105.0) * 0.5;
+    let t54 = z * 945.0;
     [
         t30,
         t31 * c1,
         t31 * s1,
         t32 * c2,
         t32 * s2,
-        t33 * c3,
-        t33 * s3,
+        c3 * 15.0,
+        s3 * 15.0,
         t40,
         t41 * c1,
         t41 * s1,
@@ -345,8 +361,8 @@ pub(crate) fn solid_harmonics(y: DVec3) -> [f64; HARMONIC_COUNT] {
         t42 * s2,
         t43 * c3,
         t43 * s3,
-        t44 * c4,
-        t44 * s4,
+        c4 * 105.0,
+        s4 * 105.0,
         t50,
         t51 * c1,
         t51 * s1,
@@ -356,8 +372,8 @@ pub(crate) fn solid_harmonics(y: DVec3) -> [f64; HARMONIC_COUNT] {
         t53 * s3,
         t54 * c4,
         t54 * s4,
-        t55 * c5,
-        t55 * s5,
+        c5 * 945.0,
+        s5 * 945.0,
     ]
 }
 
@@ -390,111 +406,126 @@ pub(crate) fn harmonic_norms(
     out
 }
 
-/// Computes a node's statistics over `lights[range]` (all in `f64`,
-/// then stored as documented on [`Node`]).
-pub(super) fn node_stats(lights: &[PointLight], range: core::ops::Range<usize>) -> Node {
-    let members = &lights[range.clone()];
-    let mut intensity = DVec3::ZERO;
-    let mut weight = 0.0f64;
-    let mut weighted_pos = DVec3::ZERO;
-    let mut plain_pos = DVec3::ZERO;
-    let mut aabb = Aabb::EMPTY;
-    for &l in members {
-        let w = f64::from(l.weight());
-        let x = l.position.as_dvec3();
-        intensity += l.intensity.as_dvec3();
-        weight += w;
-        weighted_pos += w * x;
-        plain_pos += x;
-        aabb = aabb.union_point(l.position);
-    }
-    // Zero total weight: every member is dark; use the plain mean so the node
-    // still has a sensible position (its contribution is zero either way).
-    let centroid_f64 = if weight > 0.0 {
-        weighted_pos / weight
-    } else {
-        plain_pos / members.len() as f64
-    };
-    // The average lies in the box in exact arithmetic; clamp away rounding.
-    let centroid = centroid_f64.as_vec3().clamp(aabb.min, aabb.max);
-    let c = centroid.as_dvec3();
-
-    let mut radius_sq = 0.0f64;
-    for l in members {
-        let d = l.position.as_dvec3() - c;
-        radius_sq = radius_sq.max(d.length_squared());
-    }
-    let radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
-    let inv_radius = if radius > 0.0 {
-        1.0 / f64::from(radius)
-    } else {
-        0.0
-    };
-
-    let mut first = [DVec3::ZERO; 3];
-    let mut second = [[0.0f64; 6]; 3];
-    let mut harmonic = [[0.0f64; HARMONIC_COUNT]; 3];
-    for &l in members {
-        let d = l.position.as_dvec3() - c;
-        let i = l.intensity.as_dvec3();
-        let products = [
-            d.x * d.x,
-            d.y * d.y,
-            d.z * d.z,
-            d.x * d.y,
-            d.x * d.z,
-            d.y * d.z,
-        ];
-        let scaled = d * inv_radius;
-        let harmonics = solid_harmonics(scaled);
-        for ch in 0..3 {
-            first[ch] += i[ch] * d;
-            for (acc, prod) in second[ch].iter_mut().zip(products) {
-                *acc += i[ch] * prod;
-            }
-            for (acc, h) in harmonic[ch].iter_mut().zip(harmonics) {
-                *acc += i[ch] * h;
-            }
+impl Node {
+    /// A node over `lights` (leaf order) with no statistics yet.
+    fn covering(lights: core::ops::Range<usize>) -> Self {
+        Self {
+            intensity: DVec3::ZERO,
+            weight: 0.0,
+            moment_error: 0.0,
+            centroid: Vec3::ZERO,
+            radius: 0.0,
+            channel_offsets: [Vec3::ZERO; 3],
+            channel_covariances: [[0.0; 6]; 3],
+            harmonic_norms: [Vec3::ZERO; 3],
+            aabb: Aabb::EMPTY,
+            first_light: lights.start as u32,
+            light_count: lights.len() as u32,
+            first_child: 0,
+            child_count: 0,
         }
     }
-    let offset = |k: usize| -> Vec3 {
-        if intensity[k] > 0.0 {
-            (first[k] / intensity[k]).as_vec3()
+}
+
+/// Computes every node's statistics from the lights, in time linear in
+/// their number (plus `O(n * depth)` cheap distance checks for the radii),
+/// for a tree whose topology is set: children hold larger indices than
+/// their parent.
+///
+/// 1. Intensities, weights, weighted positions and boxes, children before
+///    parents (the sums of a node are its children's sums), then centroids.
+/// 2. Radii: the largest distance from the centroid to a member.
+/// 3. Moments up to degree 5 (see [`Moments`]): summed directly over each
+///    leaf's lights, shifted from the children's centroids to the parent's
+///    for every other node, depth first so that only one path's moments
+///    are held at a time.
+pub(super) fn fill_statistics(tree: &mut LightTree) {
+    let lights = &tree.lights;
+    let nodes = &mut tree.nodes;
+    // Per node: summed weight, weighted position and plain position.
+    let mut sums = vec![(0.0f64, DVec3::ZERO, DVec3::ZERO); nodes.len()];
+    for i in (0..nodes.len()).rev() {
+        let node = nodes[i];
+        let mut intensity = DVec3::ZERO;
+        let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
+        let mut aabb = Aabb::EMPTY;
+        if node.is_leaf() {
+            for l in &lights[node.lights()] {
+                let w = f64::from(l.weight());
+                let x = l.position.as_dvec3();
+                intensity += l.intensity.as_dvec3();
+                weight += w;
+                weighted += w * x;
+                plain += x;
+                aabb = aabb.union_point(l.position);
+            }
         } else {
-            Vec3::ZERO
-        }
-    };
-    let sum_slack = members.len() as f64 * f64::EPSILON;
-    let mut covariances = [[0.0f32; 6]; 3];
-    for ch in 0..3 {
-        if intensity[ch] > 0.0 {
-            for (j, out) in covariances[ch].iter_mut().enumerate() {
-                let v = second[ch][j] / intensity[ch];
-                *out = if j < 3 {
-                    // A sum of n non-negative terms is within n 2^-53 of
-                    // exact (relative).
-                    round_up_f32(v * (1.0 + BUILD_LENGTH_SLACK + sum_slack))
-                } else {
-                    v as f32
-                };
+            for c in node.children() {
+                let (w, wx, x) = sums[c];
+                intensity += nodes[c].intensity;
+                weight += w;
+                weighted += wx;
+                plain += x;
+                aabb = aabb.union(nodes[c].aabb);
             }
         }
+        sums[i] = (weight, weighted, plain);
+        // Zero total weight: every member is dark; use the plain mean so the
+        // node still has a sensible position (its contribution is zero
+        // either way).
+        let centroid = if weight > 0.0 {
+            weighted / weight
+        } else {
+            plain / f64::from(node.light_count)
+        };
+        let node = &mut nodes[i];
+        node.intensity = intensity;
+        node.weight = (weight as f32).min(f32::MAX);
+        // The average lies in the box in exact arithmetic; clamp away
+        // rounding.
+        node.centroid = centroid.as_vec3().clamp(aabb.min, aabb.max);
+        node.aabb = aabb;
     }
-    let harmonic_norms = harmonic_norms(&harmonic, intensity, members.len());
-    Node {
-        intensity,
-        weight,
-        centroid,
-        radius,
-        channel_offsets: [offset(0), offset(1), offset(2)],
-        channel_covariances: covariances,
-        harmonic_norms,
-        aabb,
-        first_light: range.start as u32,
-        light_count: members.len() as u32,
-        first_child: 0,
-        child_count: 0,
+    drop(sums);
+    for node in nodes.iter_mut() {
+        let c = node.centroid.as_dvec3();
+        let radius_sq = lights[node.lights()]
+            .iter()
+            .map(|l| (l.position.as_dvec3() - c).length_squared())
+            .fold(0.0f64, f64::max);
+        node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
     }
+    if !nodes.is_empty() {
+        // One buffer per level of the current path.
+        let mut path = vec![Moments::ZERO; tree.depth as usize + 1];
+        fill_moments(nodes, lights, 0, &mut path);
+    }
+}
+
+/// The moments of node `index` about its centroid into `path[0]`, after
+/// its descendants' (into `path[1]`, one level down); stores the node's
+/// moment statistics.
+fn fill_moments(nodes: &mut [Node], lights: &[PointLight], index: usize, path: &mut [Moments]) {
+    let node = nodes[index];
+    let c = node.centroid.as_dvec3();
+    let (out, below) = path
+        .split_first_mut()
+        .expect("one buffer per level of the tree");
+    if node.is_leaf() {
+        out.set_to_lights(&lights[node.lights()], c);
+    } else {
+        out.clear();
+        for k in node.children() {
+            fill_moments(nodes, lights, k, below);
+            below[0].shift_into(nodes[k].centroid.as_dvec3() - c, out);
+        }
+    }
+    let stats = out.statistics(node.intensity, node.radius, node.light_count as usize);
+    let node = &mut nodes[index];
+    node.channel_offsets = stats.offsets;
+    node.channel_covariances = stats.covariances;
+    node.harmonic_norms = stats.harmonic_norms;
+    node.moment_error = stats.moment_error;
 }
 
 #[cfg(test)]

@@ -17,7 +17,8 @@ use crate::geometry::{Aabb, Cone};
 ///
 /// * [`intensity`](Self::intensity) `= sum_i I_i` (per channel, in `f64` so
 ///   that sums of lights near `f32::MAX` do not overflow);
-/// * [`weight`](Self::weight) `W = sum_i w_i`;
+/// * [`weight`](Self::weight) `W = sum_i w_i` (summed in `f64`, stored
+///   rounded to `f32`, at most `f32::MAX`);
 /// * [`centroid`](Self::centroid) `c = sum_i w_i x_i / W` rounded to `f32`
 ///   (the virtual light's position; the plain mean of the positions when
 ///   `W = 0`). Every other moment is taken about this *stored* `c`, so the
@@ -35,7 +36,12 @@ use crate::geometry::{Aabb, Cone};
 ///   with `y_i = x_i - c`, `y^_i = y_i / |y_i|` and `P_l` the Legendre
 ///   polynomial, rounded upward (at most 1, far less where the members'
 ///   multipoles cancel);
-/// * [`aabb`](Self::aabb): the tight box of the members.
+/// * [`aabb`](Self::aabb): the tight box of the members;
+/// * [`moment_error`](Self::moment_error) `delta`: the build's certified
+///   bound on the rounding of the `f64` first and second moment sums behind
+///   `o_k` and `S_k` (each entry of `I_k o_k` within `delta I_k R` of its
+///   exact value, each entry of `I_k S_k` within `delta I_k R^2`), before
+///   their rounding to `f32`.
 ///
 /// Its lights occupy a contiguous range of the tree's leaf order; its children,
 /// if any, a contiguous range of the node array.
@@ -45,7 +51,8 @@ use crate::geometry::{Aabb, Cone};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Node {
     pub(crate) intensity: DVec3,
-    pub(crate) weight: f64,
+    pub(crate) weight: f32,
+    pub(crate) moment_error: f32,
     pub(crate) centroid: Vec3,
     pub(crate) radius: f32,
     pub(crate) channel_offsets: [Vec3; 3],
@@ -66,10 +73,22 @@ impl Node {
     pub fn intensity(&self) -> DVec3 {
         self.intensity
     }
-    /// Summed scalar weight `W` (largest channel per light).
+    /// Summed scalar weight `W` (largest channel per light), rounded to
+    /// `f32` and at most `f32::MAX`.
     #[inline]
     pub fn weight(&self) -> f64 {
-        self.weight
+        f64::from(self.weight)
+    }
+    /// The build's bound `delta` on the rounding of the `f64` sums behind
+    /// [`channel_offsets`](Self::channel_offsets) and
+    /// [`channel_covariances`](Self::channel_covariances): each entry of
+    /// `I_k o_k` is within `delta I_k R` of the exact sum, each entry of
+    /// `I_k S_k` within `delta I_k R^2`, before the `f32` rounding
+    /// (diagonals of `S_k` are rounded upward past it). Of order
+    /// `1e-14` (a few hundred `f64::EPSILON`).
+    #[inline]
+    pub fn moment_error(&self) -> f64 {
+        f64::from(self.moment_error)
     }
     /// Position of the virtual light: the weight-averaged member position.
     #[inline]

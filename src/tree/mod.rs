@@ -3,6 +3,7 @@
 
 mod build;
 mod layout;
+mod moments;
 pub(crate) mod morton;
 mod plane;
 mod refit;

@@ -1,6 +1,6 @@
 //! Refitting: new positions and intensities, the same grouping.
 
-use super::build::{check_lights, node_stats};
+use super::build::{check_lights, fill_statistics};
 use super::layout::LightTree;
 use crate::{BuildError, PointLight};
 
@@ -12,7 +12,8 @@ impl LightTree {
     /// `lights` is in the caller's original order and must have the length
     /// the tree was built with. Bounds stay certified after a refit (they are
     /// recomputed, not extrapolated); only their tightness depends on the
-    /// lights having stayed near their groups. Time `O(n * depth)`.
+    /// lights having stayed near their groups. Time as for a build's
+    /// statistics: linear, plus the radii's `O(n * depth)` distance checks.
     ///
     /// # Errors
     /// The same [`BuildError`]s as building, checked before anything changes;
@@ -28,13 +29,7 @@ impl LightTree {
         for (slot, &k) in self.lights.iter_mut().zip(&self.order) {
             *slot = lights[k as usize];
         }
-        for i in 0..self.nodes.len() {
-            let old = self.nodes[i];
-            let mut fresh = node_stats(&self.lights, old.lights());
-            fresh.first_child = old.first_child;
-            fresh.child_count = old.child_count;
-            self.nodes[i] = fresh;
-        }
+        fill_statistics(self);
         super::plane::record_planes(self);
         Ok(())
     }
