@@ -256,7 +256,7 @@ impl Lambert {
 }
 
 /// `e^T S e` for the symmetric matrix stored as `[xx, yy, zz, xy, xz, yz]`.
-#[inline]
+#[inline(always)]
 fn quadratic_form(s: &[f64; 6], e: DVec3) -> f64 {
     s[0] * e.x * e.x
         + s[1] * e.y * e.y
@@ -284,7 +284,7 @@ fn tail_sums(sigma: f64, inv_rho: f64) -> (f64, f64) {
 /// decided exactly ([`Aabb::lies_at_or_below`](crate::Aabb::lies_at_or_below)),
 /// with no slack: then the highest value returned is at most 0, so a box
 /// lying exactly in the plane is recognised as contributing 0.
-#[inline]
+#[inline(always)]
 fn box_heights(node: &Node, surface: &Surface) -> (f64, f64) {
     let (lowest, highest) =
         node.aabb
@@ -329,7 +329,7 @@ impl Shader for Lambert {
     /// `f64::EPSILON` near the plane (error-free transformations, see
     /// [`numeric`](crate::numeric)): a light in the tangent plane
     /// contributes exactly 0, one barely above it its value to a few ulps.
-    #[inline]
+    #[inline(always)]
     fn eval(&self, _: &(), surface: &Surface, position: DVec3, intensity: DVec3) -> DVec3 {
         let normal = surface.given_normal.as_dvec3();
         let height = dot_of_difference(normal, position, surface.point);
@@ -344,7 +344,7 @@ impl Shader for Lambert {
         intensity * self.kd * (height / scale)
     }
 
-    #[inline]
+    #[inline(always)]
     fn bound(&self, _: &(), surface: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
         let n = surface.normal;
         // cos and sin of the angle between the normal and the axis.
@@ -523,7 +523,7 @@ impl Lambert {
     /// The multipole series interval `(lower, upper)` of the smooth sum,
     /// widened upward by the clamp term; the estimate is the final
     /// interval's midpoint.
-    #[inline]
+    #[inline(always)]
     fn series(&self, geo: &Geometry<'_>) -> (DVec3, DVec3, Option<DVec3>) {
         let (surface, node, cone, scale) = (geo.surface, geo.node, geo.cone, geo.scale);
         let n = surface.normal;
@@ -588,6 +588,7 @@ pub(crate) struct SharedView {
 /// `nu <= 1`; `|nperp . y| <= |n . y| + |c0| |uh . y|`,
 /// `|n . y| <= |n0 . y| + |n - n0| |y|` and `|y| <= R` give
 /// `hperp <= height + (tilt + |c0|) R`; and `I_k / D_p^2 <= I_k / D^2`.
+#[inline(always)]
 pub(crate) fn shared_width(node: &Node, view: &SharedView) -> DVec3 {
     let inv_d = view.inv_nearest;
     let radius = f64::from(node.radius);
@@ -603,7 +604,7 @@ pub(crate) fn shared_width(node: &Node, view: &SharedView) -> DVec3 {
 /// from degree 6; see [`Lambert`]) and the rounding slack, for
 /// `(1/D, sigma = R/D, D/(D - R))` and the (widened) `|c0|`, `nu^2` and
 /// `hperp / D`.
-#[inline]
+#[inline(always)]
 fn series_width(
     node: &Node,
     (inv_d, sigma, inv_rho): (f64, f64, f64),
@@ -650,7 +651,7 @@ fn series_width(
 /// `c0 + (n.o - 3 c0 uh.o) / D + (15 c0 uh.S.uh - 3 c0 tr S - 6 uh.S.n) / (2 D^2)`.
 /// The node bound and the shared cuts of batch shading both evaluate it
 /// here, so its rounding is the one [`SERIES_SLACK`] accounts for.
-#[inline]
+#[inline(always)]
 pub(crate) fn degree_two(n: DVec3, cone: &Cone, node: &Node) -> DVec3 {
     let uh = cone.axis;
     let c0 = n.dot(uh);

@@ -441,7 +441,7 @@ pub(crate) fn exact_dot_of_difference<const N: usize>(a: [&[f64]; 3], x: DVec3, 
 /// [`dot2_of_difference`] ([`DOT2_ACCEPT`]), an exact expansion.
 ///
 /// [`Surface`]: crate::Surface
-#[inline]
+#[inline(always)]
 #[must_use]
 pub(crate) fn dot_of_difference(a: DVec3, x: DVec3, p: DVec3) -> f64 {
     let (z, magnitude) = plain_dot_of_difference(a, x, p);
@@ -456,7 +456,7 @@ pub(crate) fn dot_of_difference(a: DVec3, x: DVec3, p: DVec3) -> f64 {
 /// p_j))|` its error is measured against: the result is within `gamma_4`
 /// (`4u / (1 - 4u)`, `u = 2^-53`) times the exact magnitude of the exact
 /// value (see [`NAIVE_DOT_ACCEPT`]).
-#[inline]
+#[inline(always)]
 #[must_use]
 pub(crate) fn plain_dot_of_difference(a: DVec3, x: DVec3, p: DVec3) -> (f64, f64) {
     let terms = a * (x - p);

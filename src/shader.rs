@@ -39,14 +39,14 @@ impl NodeEstimate {
 
     /// Error of the estimate per channel: `max(estimate - lower, upper -
     /// estimate)`.
-    #[inline]
+    #[inline(always)]
     #[must_use]
     pub fn error(&self) -> DVec3 {
         (self.estimate - self.lower).max(self.upper - self.estimate)
     }
 
     /// The interval `[lower, upper]` with `estimate` clamped into it.
-    #[inline]
+    #[inline(always)]
     #[must_use]
     pub fn new(estimate: DVec3, lower: DVec3, upper: DVec3) -> Self {
         Self {

@@ -51,6 +51,7 @@ impl Aabb {
     /// outward by `relative_slack` times the magnitude of the coordinates
     /// involved, so that the interval holds every point of the stored box.
     #[must_use]
+    #[inline(always)]
     pub fn extent_along(&self, origin: DVec3, dir: DVec3, relative_slack: f64) -> (f64, f64) {
         let (min, max) = (self.min.as_dvec3(), self.max.as_dvec3());
         let centre = 0.5 * (min + max);

@@ -155,6 +155,7 @@ impl Group {
     /// tilt |c - p|` and `|c - p| <= distance + radius`, so `|c0|` is at most
     /// that over the nearest distance; the box's heights about the centroid
     /// along `n0` bound `|n0 . (x - c)|`.
+    #[inline(always)]
     fn view(&self, node: &Node, inv_nearest: f64, distance: f64) -> SharedView {
         let centroid = node.centroid.as_dvec3();
         let far = (distance + self.radius) * (1.0 + DISTANCE_SLACK);
@@ -180,7 +181,7 @@ impl Group {
     /// `n.(x - p) = n0.(x - c) + n0.(c - p) + (n - n0).(x - p)`: the first
     /// term ranges over the box's extent along `n0`, the second over
     /// `[-rise, drop]`, the third within `tilt * |x - p|`.
-    #[inline]
+    #[inline(always)]
     fn side(&self, aabb: &Aabb, reach: f64) -> Side {
         let (lo, hi) = aabb.extent_along(self.centre, self.normal, SECOND_ORDER_SLACK);
         self.side_of(lo, hi, reach)
@@ -189,7 +190,7 @@ impl Group {
     /// [`side`](Self::side) for members whose heights `n0 . (x - centre)`
     /// lie in `[lo, hi]` up to the rounding of an `f64` dot product of
     /// a difference (covered by the margin).
-    #[inline]
+    #[inline(always)]
     fn side_of(&self, lo: f64, hi: f64, reach: f64) -> Side {
         let spread = self.tilt * reach * (1.0 + DISTANCE_SLACK);
         let margin =
@@ -207,7 +208,7 @@ impl Group {
     /// A lower bound on the distance from every point to a member at least
     /// `distance` from the centre and at least `lowest` above every
     /// tangent plane (a unit normal's height is at most the distance).
-    #[inline]
+    #[inline(always)]
     fn nearest(&self, distance: f64, lowest: f64) -> f64 {
         (distance * (1.0 - DISTANCE_SLACK) - self.radius).max(lowest)
     }
@@ -250,7 +251,7 @@ impl Samples {
 
     /// A virtual light's value `I kd max(0, n.w) / d^2` at each sample
     /// (`intensity` already times `kd`): an estimate good enough to steer.
-    #[inline]
+    #[inline(always)]
     fn values(&self, position: DVec3, intensity: DVec3) -> [DVec3; SAMPLES] {
         let mut g = [0.0f64; SAMPLES];
         for (k, g) in g.iter_mut().enumerate() {
@@ -271,6 +272,7 @@ impl Samples {
 }
 
 /// The sum of the darkest sample (smallest largest channel).
+#[inline(always)]
 fn darkest(sums: &[DVec3; SAMPLES]) -> DVec3 {
     let mut least = sums[0];
     for s in &sums[1..] {
@@ -366,6 +368,7 @@ impl<V: Visibility> SharedCut<'_, V> {
     /// Asks the host about `region` for the whole group, unless `visible`
     /// is known already; `None` when it is occluded, else whether it is
     /// visible.
+    #[inline(always)]
     fn ask(&mut self, visible: bool, region: &NodeRegion) -> Option<bool> {
         if visible || V::ALWAYS_VISIBLE {
             return Some(true);
@@ -381,6 +384,7 @@ impl<V: Visibility> SharedCut<'_, V> {
     /// Puts a single light into the cut unless it is below every point's
     /// tangent plane or hidden from the whole group (`visible` when its
     /// node is known visible; `leaf` is its node, for the host).
+    #[inline(always)]
     fn light(
         &mut self,
         scratch: &mut BatchScratch,
@@ -442,6 +446,7 @@ impl<V: Visibility> SharedCut<'_, V> {
     /// a single light when its radius is 0, else an entry of the error list
     /// (to be refined whatever its error when the shared bound does not
     /// apply).
+    #[inline(always)]
     fn enter(&mut self, scratch: &mut BatchScratch, index: usize, visible: bool) {
         if let Some(entering) = self.entering(scratch, index, visible, 1.0) {
             self.push(scratch, index, entering);
@@ -449,6 +454,7 @@ impl<V: Visibility> SharedCut<'_, V> {
     }
 
     /// Puts node `index` into the error list as `entering` says.
+    #[inline(always)]
     fn push(&mut self, scratch: &mut BatchScratch, index: usize, entering: Entering) {
         let node = &self.tree.nodes[index];
         let seen = if entering.visible {
@@ -493,6 +499,7 @@ impl<V: Visibility> SharedCut<'_, V> {
     /// else whether it is visible and its shared error, if it has one (none
     /// when too near, across some plane or partly hidden: it must be
     /// refined).
+    #[inline(always)]
     fn entering(
         &mut self,
         scratch: &mut BatchScratch,
@@ -523,6 +530,7 @@ impl<V: Visibility> SharedCut<'_, V> {
 
     /// Refines `node` with blend `weight`: its lights into the cut, or each
     /// child through `child(index, entering)`.
+    #[inline(always)]
     fn refine(
         &mut self,
         scratch: &mut BatchScratch,
@@ -551,6 +559,7 @@ impl<V: Visibility> SharedCut<'_, V> {
     /// width, plus the clamp term for members below some point's tangent
     /// plane); `Ok(None)` for a node below every tangent plane, `Err(())`
     /// for one whose ball comes too near the group.
+    #[inline(always)]
     fn shared_bound(&self, node: &Node) -> Result<Option<DVec3>, ()> {
         let group = &self.group;
         let distance = (node.centroid.as_dvec3() - group.centre).length();
@@ -660,6 +669,7 @@ impl<V: Visibility> SharedCut<'_, V> {
     }
 
     /// The darkest sample's estimate of the cut.
+    #[inline(always)]
     fn steering(&self) -> DVec3 {
         let sums = core::array::from_fn(|k| self.steer_settled[k] + self.steer_waiting[k]);
         darkest(&sums)
@@ -667,6 +677,7 @@ impl<V: Visibility> SharedCut<'_, V> {
 
     /// Recomputes the running sums of the samples' values of the waiting
     /// entries (they subtract and may drift).
+    #[inline(always)]
     fn resum_steering(&mut self, scratch: &BatchScratch) {
         let mut sums: [CompensatedSum; SAMPLES] = Default::default();
         for (_, slot) in scratch.list.waiting() {
@@ -679,6 +690,7 @@ impl<V: Visibility> SharedCut<'_, V> {
 
     /// The error list's loop over the shared bounds until `met` holds for
     /// the representative's estimate and the summed error.
+    #[inline(always)]
     fn run(
         &mut self,
         scratch: &mut BatchScratch,
@@ -1087,8 +1099,47 @@ impl<S: Shader> Shading<'_, S> {
 
     /// Picks a shared cut for `members` and shades them through it; fills
     /// the scratch results and marks the members that still need shading on
-    /// their own.
+    /// their own. On `x86_64` processors with AVX2, a copy compiled for AVX2
+    /// (the same bits, see [`dispatch`](super::dispatch)).
+    // Calling the AVX2 copy is one of the crate's unsafe blocks.
+    #[allow(unsafe_code)]
     fn shade_shared<M, V: Visibility>(
+        &mut self,
+        queries: &[Query<M>],
+        members: &[u32],
+        threshold: &Threshold,
+        visibility: &mut V,
+        stats: &mut BatchStats,
+    ) -> Result<(), TooCostly> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if super::dispatch::avx2() {
+                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+                return unsafe {
+                    self.shade_shared_avx2(queries, members, threshold, visibility, stats)
+                };
+            }
+        }
+        self.shade_shared_inlined(queries, members, threshold, visibility, stats)
+    }
+
+    /// [`shade_shared`](Self::shade_shared) compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn shade_shared_avx2<M, V: Visibility>(
+        &mut self,
+        queries: &[Query<M>],
+        members: &[u32],
+        threshold: &Threshold,
+        visibility: &mut V,
+        stats: &mut BatchStats,
+    ) -> Result<(), TooCostly> {
+        self.shade_shared_inlined(queries, members, threshold, visibility, stats)
+    }
+
+    /// The shared cut itself, inlined into each of the above.
+    #[inline(always)]
+    fn shade_shared_inlined<M, V: Visibility>(
         &mut self,
         queries: &[Query<M>],
         members: &[u32],
@@ -1116,6 +1167,7 @@ impl<S: Shader> Shading<'_, S> {
     }
 
     /// [`shade_shared`](Self::shade_shared) with its scratch taken out.
+    #[inline(always)]
     fn shared_cut<M, V: Visibility>(
         &self,
         (queries, members): (&[Query<M>], &[u32]),
@@ -1246,6 +1298,7 @@ impl<S: Shader> Shading<'_, S> {
     /// One point's sum over the shared cut in `scratch`, clamped at 0 (the
     /// exact value is non-negative), and the point-to-point queries it
     /// asked.
+    #[inline(always)]
     fn point_sum<M, V: Visibility>(
         &self,
         query: &Query<M>,

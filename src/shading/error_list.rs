@@ -210,7 +210,7 @@ impl ErrorList {
 
     /// Adds an entry; returns its slot, the number of entries pushed
     /// before it since the last [`clear`](Self::clear).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn push(&mut self, e: Entry) -> u32 {
         match e.class {
             Class::Unbounded => self.unbounded += 1,
@@ -253,7 +253,7 @@ impl ErrorList {
     }
 
     /// Finds (and remembers) the largest waiting entry.
-    #[inline]
+    #[inline(always)]
     fn find_best(&mut self) -> Option<(u32, u32, usize)> {
         if self.best.is_some() {
             return self.best;
@@ -293,14 +293,14 @@ impl ErrorList {
     }
 
     /// The entry that would be refined next.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn peek(&mut self) -> Option<&Entry> {
         let (slot, _, _) = self.find_best()?;
         Some(&self.entries[slot as usize])
     }
 
     /// Removes the largest waiting entry; returns it with its slot.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn pop_slot(&mut self) -> Option<(Entry, u32)> {
         let (slot, prev, bucket) = self.find_best()?;
         self.best = None;

@@ -4,6 +4,7 @@
 
 mod batch;
 mod blend;
+mod dispatch;
 mod error_list;
 mod exact;
 mod packed;
@@ -17,6 +18,7 @@ use core::fmt;
 use glam::{DVec3, Vec3};
 
 use crate::ShadeError;
+use crate::geometry::Surface;
 use crate::shader::{Shader, ViewIndependent};
 use crate::tree::LightTree;
 use crate::visibility::{Unoccluded, Visibility};
@@ -115,11 +117,60 @@ impl<'t, S: Shader> Shading<'t, S> {
         S: Accepts<M>,
     {
         threshold.check()?;
+        Ok(self.shade_checked(query.surface(), query.point(), &threshold, visibility))
+    }
+
+    /// [`shade_query`](Self::shade_query) after its checks: on `x86_64`
+    /// processors with AVX2, a copy of the whole cut compiled for AVX2 (the
+    /// same bits, see [`dispatch`]), elsewhere the baseline build.
+    // Calling the AVX2 copy is one of the crate's unsafe blocks (with the
+    // batch sum's wider copies and the prefetch hint in `tree::layout`).
+    #[allow(unsafe_code)]
+    fn shade_checked<V: Visibility>(
+        &mut self,
+        surface: &Surface,
+        point: Vec3,
+        threshold: &Threshold,
+        visibility: V,
+    ) -> ShadeResult {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if dispatch::avx2() {
+                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+                return unsafe { self.shade_avx2(surface, point, threshold, visibility) };
+            }
+        }
+        self.shade_inlined(surface, point, threshold, visibility)
+    }
+
+    /// [`shade_checked`](Self::shade_checked) compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn shade_avx2<V: Visibility>(
+        &mut self,
+        surface: &Surface,
+        point: Vec3,
+        threshold: &Threshold,
+        visibility: V,
+    ) -> ShadeResult {
+        self.shade_inlined(surface, point, threshold, visibility)
+    }
+
+    /// The cut itself, inlined into each of the above.
+    #[inline(always)]
+    fn shade_inlined<V: Visibility>(
+        &mut self,
+        surface: &Surface,
+        point: Vec3,
+        threshold: &Threshold,
+        visibility: V,
+    ) -> ShadeResult {
+        let threshold = *threshold;
         let mut cut = Cut::new(
             self.tree,
             &self.shader,
-            query.surface(),
-            query.point(),
+            surface,
+            point,
             &threshold,
             visibility,
         );
@@ -155,7 +206,7 @@ impl<'t, S: Shader> Shading<'t, S> {
                 (radiance, bound) = (r, e);
             }
         }
-        Ok(ShadeResult {
+        ShadeResult {
             radiance,
             error_bound: if unbounded { DVec3::INFINITY } else { bound },
             nodes_evaluated: cut.nodes,
@@ -163,7 +214,7 @@ impl<'t, S: Shader> Shading<'t, S> {
             classify_queries: cut.classify_queries,
             point_queries: cut.point_queries,
             stop: outcome.stop,
-        })
+        }
     }
 
     /// The exact model (crate docs, "The model") for one query, summed over

@@ -99,19 +99,20 @@ impl Packed {
     ///
     /// Every entry must lie farther from `point` than its radius (the shared
     /// cut guarantees it), so `D > 0`.
-    // One of the crate's two unsafe blocks (the other is the prefetch hint
-    // in `tree::layout`): calling the copies compiled for wider
-    // vectors once the processor is known to have them.
+    // Calling the copies compiled for wider vectors once the processor is
+    // known to have them is one of the crate's unsafe blocks (see
+    // `dispatch`; the others call the cut's AVX2 copies and the prefetch
+    // hint in `tree::layout`).
     #[allow(unsafe_code)]
     pub(crate) fn sum(&self, point: DVec3, normal: DVec3) -> DVec3 {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                // SAFETY: the processor has AVX-512F, checked just above.
+            if super::dispatch::avx512f() {
+                // SAFETY: the processor has AVX-512F (`dispatch` checked).
                 return unsafe { self.sum_avx512(point, normal) };
             }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the processor has AVX2, checked just above.
+            if super::dispatch::avx2() {
+                // SAFETY: the processor has AVX2 (`dispatch` checked).
                 return unsafe { self.sum_avx2(point, normal) };
             }
         }

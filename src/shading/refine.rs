@@ -104,7 +104,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// budget, `visible` saying whether the node is known visible (its
     /// small children are then summed light by light, see
     /// [`EXACT_NODE_LIGHTS`]).
-    #[inline]
+    #[inline(always)]
     pub(crate) fn can_refine(&self, node: &Node, visible: bool) -> bool {
         let cost = if node.is_leaf() {
             node.light_count
@@ -134,7 +134,9 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     ///
     /// With `nesting` (interpolation across levels), priorities are capped
     /// at the parent's and the refined part of the cut is recorded for the
-    /// blend (see [`blend`](super::blend)).
+    /// blend (see [`blend`](super::blend)). Inlined into each compiled copy
+    /// of the shading call.
+    #[inline(always)]
     pub(crate) fn run(
         &mut self,
         list: &mut ErrorList,
@@ -312,7 +314,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// `weight`), or returns it as an entry (not weighted). Nothing is asked of the host here: a node of
     /// unknown visibility enters the cut as anything in `[0, upper]` and is
     /// asked about only when the cut takes it.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn evaluate(&mut self, index: usize, visible: bool, weight: f64) -> Option<Entry> {
         let node: &Node = &self.tree.nodes[index];
         if node.intensity == DVec3::ZERO {
@@ -372,7 +374,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
 
     /// Whether the lights of plane `plane` lie at or below the plane of the
     /// shader's [`horizon`](Shader::horizon) (never without one).
-    #[inline]
+    #[inline(always)]
     fn below_horizon(&mut self, plane: u32) -> bool {
         let Some(normal) = self.horizon else {
             return false;
@@ -391,7 +393,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// that contributes anything is asked about point-to-point at once (it
     /// enters the cut only when its node is refined, and one ray settles it
     /// exactly); dark lights and lights behind the surface need no ray.
-    #[inline]
+    #[inline(always)]
     fn exact_light(&mut self, position: Vec3, intensity: DVec3, seen: Seen, weight: f64) {
         self.lights += 1;
         let value = self.shader.eval(
@@ -414,14 +416,14 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
 
     /// Whether a visible node is summed light by light when it enters the
     /// cut instead of bounded (see [`EXACT_NODE_LIGHTS`]).
-    #[inline]
+    #[inline(always)]
     fn sums_exactly(&self, node: &Node) -> bool {
         node.radius != 0.0 && node.light_count <= self.exact_lights
     }
 
     /// Each light of `range` (leaf order) exactly, see
     /// [`exact_light`](Self::exact_light).
-    #[inline]
+    #[inline(always)]
     fn sum_lights(&mut self, range: core::ops::Range<usize>, seen: Seen, weight: f64) {
         for k in range {
             let l = self.tree.lights[k];
@@ -432,7 +434,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// Refines `node`: its lights exactly if it is a leaf, its children
     /// otherwise, each with blend weight `weight`; entries that stay in the
     /// cut are passed to `pending`.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn refine(
         &mut self,
         node: &Node,

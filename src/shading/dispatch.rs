@@ -1,0 +1,173 @@
+//! Which compiled copy of the shading code runs: on `x86_64` processors
+//! with AVX2 (or AVX-512F, for the batch call's sums), copies compiled for
+//! them (wider vectors, three-operand instructions), picked at run time, so
+//! that a default build gets them.
+//! Rust never fuses a multiply and an add, and every other operation is
+//! exactly rounded the same way in both copies, so the results are the same
+//! bits (the tests compare them).
+
+/// Whether the copies compiled for AVX2 may run.
+#[inline]
+pub(crate) fn avx2() -> bool {
+    #[cfg(test)]
+    if BASELINE.with(core::cell::Cell::get) {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Whether the copies compiled for AVX-512F may run.
+#[inline]
+pub(crate) fn avx512f() -> bool {
+    #[cfg(test)]
+    if BASELINE.with(core::cell::Cell::get) {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+#[cfg(test)]
+std::thread_local! {
+    /// Set by tests on their own thread to run the baseline copies.
+    static BASELINE: core::cell::Cell<bool> = const { core::cell::Cell::new(false) };
+}
+
+/// Runs `f` on this thread with the baseline copies only.
+#[cfg(test)]
+pub(crate) fn baseline<T>(f: impl FnOnce() -> T) -> T {
+    BASELINE.with(|b| b.set(true));
+    let out = f();
+    BASELINE.with(|b| b.set(false));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::baseline;
+    use crate::{
+        BoundKind, Combined, Lambert, LightTree, Phong, PointLight, Query, ShadeResult, Threshold,
+        Unoccluded,
+    };
+
+    /// A small generator, so that the lights and points are the same in both
+    /// copies' runs.
+    fn uniform(state: &mut u64) -> f32 {
+        *state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (*state >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    fn lights(count: usize) -> Vec<PointLight> {
+        let mut state = 7;
+        (0..count)
+            .map(|_| {
+                let mut u = || uniform(&mut state);
+                let p = Vec3::new(u() * 40.0 - 20.0, u() * 40.0 - 20.0, u() * 6.0 + 0.5);
+                PointLight::new(p, Vec3::new(u(), u() * 2.0, u() * 0.5))
+            })
+            .collect()
+    }
+
+    fn bits(r: &ShadeResult) -> ([u64; 3], [u64; 3], u32, u32) {
+        (
+            r.radiance.to_array().map(f64::to_bits),
+            r.error_bound.to_array().map(f64::to_bits),
+            r.nodes_evaluated,
+            r.lights_evaluated,
+        )
+    }
+
+    /// Single points: the copy compiled for AVX2 (where the processor has
+    /// it) and the baseline give the same bits, for both bounds, a sum of
+    /// shaders and thresholds with and without interpolation.
+    #[test]
+    fn both_copies_of_the_cut_give_the_same_bits() {
+        let tree = LightTree::build(&lights(3000)).unwrap();
+        let thresholds = [
+            Threshold::relative(0.01),
+            Threshold::relative(0.05).with_interpolation(2.0),
+            Threshold::absolute(1e-3),
+        ];
+        let mut state = 11;
+        let mut lambert = tree.shading(Lambert::new(Vec3::new(0.8, 0.5, 0.3)));
+        let mut taylor = tree.shading(Lambert::new(Vec3::splat(0.5)).with_bound(BoundKind::Taylor));
+        let mut glossy = tree.shading(Combined::new(
+            Lambert::new(Vec3::splat(0.4)),
+            Phong::new(Vec3::splat(0.3), 30.0),
+        ));
+        for _ in 0..200 {
+            let mut u = || uniform(&mut state);
+            let point = Vec3::new(u() * 44.0 - 22.0, u() * 44.0 - 22.0, u() * 2.0 - 1.0);
+            let normal = Vec3::new(u() - 0.5, u() - 0.5, u() + 0.2);
+            let view = Vec3::new(u() - 0.5, u() - 0.5, u() + 0.1);
+            let query = Query::new(point, normal).unwrap();
+            let with_view = query.with_view(view).unwrap();
+            for t in thresholds {
+                let a = lambert.shade_query(&query, t, Unoccluded).unwrap();
+                let b = baseline(|| lambert.shade_query(&query, t, Unoccluded).unwrap());
+                assert_eq!(bits(&a), bits(&b), "{a:?} {b:?}");
+                let a = taylor.shade_query(&query, t, Unoccluded).unwrap();
+                let b = baseline(|| taylor.shade_query(&query, t, Unoccluded).unwrap());
+                assert_eq!(bits(&a), bits(&b), "{a:?} {b:?}");
+                let a = glossy.shade_query(&with_view, t, Unoccluded).unwrap();
+                let b = baseline(|| glossy.shade_query(&with_view, t, Unoccluded).unwrap());
+                assert_eq!(bits(&a), bits(&b), "{a:?} {b:?}");
+            }
+        }
+    }
+
+    /// The batch call: shared cuts and points alone, both copies, the same
+    /// bits.
+    #[test]
+    fn both_copies_of_the_batch_call_give_the_same_bits() {
+        let tree = LightTree::build(&lights(3000)).unwrap();
+        let mut shading = tree.shading(Lambert::new(Vec3::splat(0.7)));
+        let mut queries = Vec::new();
+        for y in 0..48 {
+            for x in 0..48 {
+                let point = Vec3::new(x as f32 * 0.8 - 19.0, y as f32 * 0.8 - 19.0, 0.0);
+                queries.push(Query::new(point, Vec3::Z).unwrap());
+            }
+        }
+        for t in [
+            Threshold::relative(0.01),
+            Threshold::relative(0.05).with_interpolation(2.0),
+        ] {
+            let start = shading
+                .shade(Vec3::ZERO, Vec3::Z, Threshold::absolute(f64::INFINITY))
+                .unwrap();
+            let mut a = vec![start; queries.len()];
+            let mut b = a.clone();
+            let stats_a = shading
+                .shade_batch(&queries, t, Unoccluded, &mut a)
+                .unwrap();
+            let stats_b = baseline(|| {
+                shading
+                    .shade_batch(&queries, t, Unoccluded, &mut b)
+                    .unwrap()
+            });
+            assert!(stats_a.shared_points > 0, "{stats_a:?}");
+            assert_eq!(stats_a, stats_b);
+            for (a, b) in a.iter().zip(&b) {
+                assert_eq!(bits(a), bits(b), "{a:?} {b:?}");
+            }
+        }
+    }
+}
