@@ -146,6 +146,7 @@
 
 #![deny(unsafe_code)]
 
+mod dispatch;
 mod error;
 mod geometry;
 mod lambert;

@@ -1100,7 +1100,7 @@ impl<S: Shader> Shading<'_, S> {
     /// Picks a shared cut for `members` and shades them through it; fills
     /// the scratch results and marks the members that still need shading on
     /// their own. On `x86_64` processors with AVX2, a copy compiled for AVX2
-    /// (the same bits, see [`dispatch`](super::dispatch)).
+    /// (the same bits, see [`dispatch`](crate::dispatch)).
     // Calling the AVX2 copy is one of the crate's unsafe blocks.
     #[allow(unsafe_code)]
     fn shade_shared<M, V: Visibility>(
@@ -1113,7 +1113,7 @@ impl<S: Shader> Shading<'_, S> {
     ) -> Result<(), TooCostly> {
         #[cfg(target_arch = "x86_64")]
         {
-            if super::dispatch::avx2() {
+            if crate::dispatch::avx2() {
                 // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
                 return unsafe {
                     self.shade_shared_avx2(queries, members, threshold, visibility, stats)

@@ -4,7 +4,6 @@
 
 mod batch;
 mod blend;
-mod dispatch;
 mod error_list;
 mod exact;
 mod packed;
@@ -122,7 +121,7 @@ impl<'t, S: Shader> Shading<'t, S> {
 
     /// [`shade_query`](Self::shade_query) after its checks: on `x86_64`
     /// processors with AVX2, a copy of the whole cut compiled for AVX2 (the
-    /// same bits, see [`dispatch`]), elsewhere the baseline build.
+    /// same bits, see [`dispatch`](crate::dispatch)), elsewhere the baseline build.
     // Calling the AVX2 copy is one of the crate's unsafe blocks (with the
     // batch sum's wider copies and the prefetch hint in `tree::layout`).
     #[allow(unsafe_code)]
@@ -135,7 +134,7 @@ impl<'t, S: Shader> Shading<'t, S> {
     ) -> ShadeResult {
         #[cfg(target_arch = "x86_64")]
         {
-            if dispatch::avx2() {
+            if crate::dispatch::avx2() {
                 // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
                 return unsafe { self.shade_avx2(surface, point, threshold, visibility) };
             }

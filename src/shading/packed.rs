@@ -107,11 +107,11 @@ impl Packed {
     pub(crate) fn sum(&self, point: DVec3, normal: DVec3) -> DVec3 {
         #[cfg(target_arch = "x86_64")]
         {
-            if super::dispatch::avx512f() {
+            if crate::dispatch::avx512f() {
                 // SAFETY: the processor has AVX-512F (`dispatch` checked).
                 return unsafe { self.sum_avx512(point, normal) };
             }
-            if super::dispatch::avx2() {
+            if crate::dispatch::avx2() {
                 // SAFETY: the processor has AVX2 (`dispatch` checked).
                 return unsafe { self.sum_avx2(point, normal) };
             }

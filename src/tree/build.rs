@@ -439,7 +439,34 @@ impl Node {
 ///    leaf's lights, shifted from the children's centroids to the parent's
 ///    for every other node, depth first so that only one path's moments
 ///    are held at a time.
+// Calling the AVX2 copies is one of the crate's unsafe blocks (see
+// `dispatch`).
+#[allow(unsafe_code)]
 pub(super) fn fill_statistics(tree: &mut LightTree) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if crate::dispatch::avx2() {
+            // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+            unsafe { fill_statistics_avx2(tree) };
+            return;
+        }
+    }
+    fill_statistics_inlined::<false>(tree);
+}
+
+/// [`fill_statistics`] compiled for AVX2 (the same bits, see
+/// [`dispatch`](crate::dispatch)).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn fill_statistics_avx2(tree: &mut LightTree) {
+    fill_statistics_inlined::<true>(tree);
+}
+
+/// [`fill_statistics`] itself, inlined into each copy; `AVX2` picks the
+/// moments' copy.
+#[allow(unsafe_code)]
+#[inline(always)]
+fn fill_statistics_inlined<const AVX2: bool>(tree: &mut LightTree) {
     let lights = &tree.lights;
     let nodes = &mut tree.nodes;
     // Per node: summed weight, weighted position and plain position.
@@ -498,34 +525,61 @@ pub(super) fn fill_statistics(tree: &mut LightTree) {
     if !nodes.is_empty() {
         // One buffer per level of the current path.
         let mut path = vec![Moments::ZERO; tree.depth as usize + 1];
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: `AVX2` is true only in `fill_statistics_avx2`, which
+            // runs where the processor has AVX2.
+            unsafe { fill_moments_avx2(nodes, lights, 0, &mut path) };
+            return;
+        }
         fill_moments(nodes, lights, 0, &mut path);
     }
 }
 
 /// The moments of node `index` about its centroid into `path[0]`, after
 /// its descendants' (into `path[1]`, one level down); stores the node's
-/// moment statistics.
-fn fill_moments(nodes: &mut [Node], lights: &[PointLight], index: usize, path: &mut [Moments]) {
-    let node = nodes[index];
-    let c = node.centroid.as_dvec3();
-    let (out, below) = path
-        .split_first_mut()
-        .expect("one buffer per level of the tree");
-    if node.is_leaf() {
-        out.set_to_lights(&lights[node.lights()], c);
-    } else {
-        out.clear();
-        for k in node.children() {
-            fill_moments(nodes, lights, k, below);
-            below[0].shift_into(nodes[k].centroid.as_dvec3() - c, out);
+/// moment statistics. `$recurse` is the function itself (one per compiled
+/// copy).
+macro_rules! fill_moments_body {
+    ($recurse:ident, $nodes:ident, $lights:ident, $index:ident, $path:ident) => {{
+        let node = $nodes[$index];
+        let c = node.centroid.as_dvec3();
+        let (out, below) = $path
+            .split_first_mut()
+            .expect("one buffer per level of the tree");
+        if node.is_leaf() {
+            out.set_to_lights(&$lights[node.lights()], c);
+        } else {
+            out.clear();
+            for k in node.children() {
+                $recurse($nodes, $lights, k, below);
+                below[0].shift_into($nodes[k].centroid.as_dvec3() - c, out);
+            }
         }
-    }
-    let stats = out.statistics(node.intensity, node.radius, node.light_count as usize);
-    let node = &mut nodes[index];
-    node.channel_offsets = stats.offsets;
-    node.channel_covariances = stats.covariances;
-    node.harmonic_norms = stats.harmonic_norms;
-    node.moment_error = stats.moment_error;
+        let stats = out.statistics(node.intensity, node.radius, node.light_count as usize);
+        let node = &mut $nodes[$index];
+        node.channel_offsets = stats.offsets;
+        node.channel_covariances = stats.covariances;
+        node.harmonic_norms = stats.harmonic_norms;
+        node.moment_error = stats.moment_error;
+    }};
+}
+
+/// See [`fill_moments_body`].
+fn fill_moments(nodes: &mut [Node], lights: &[PointLight], index: usize, path: &mut [Moments]) {
+    fill_moments_body!(fill_moments, nodes, lights, index, path)
+}
+
+/// [`fill_moments`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn fill_moments_avx2(
+    nodes: &mut [Node],
+    lights: &[PointLight],
+    index: usize,
+    path: &mut [Moments],
+) {
+    fill_moments_body!(fill_moments_avx2, nodes, lights, index, path)
 }
 
 #[cfg(test)]
@@ -577,5 +631,43 @@ mod tests {
                 );
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod copies {
+    use glam::Vec3;
+
+    use crate::dispatch::baseline;
+    use crate::{LightTree, PointLight};
+
+    /// The build's copy compiled for AVX2 (where the processor has it) and
+    /// the baseline give the same nodes, also after a refit.
+    #[test]
+    fn both_copies_of_the_build_give_the_same_nodes() {
+        let mut state = 3u64;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let lights: Vec<PointLight> = (0..5000)
+            .map(|_| {
+                let p = Vec3::new(uniform() * 100.0, uniform() * 100.0, uniform() * 3.0);
+                PointLight::new(p, Vec3::new(uniform(), uniform() * 5.0, uniform() * 0.01))
+            })
+            .collect();
+        let a = LightTree::build(&lights).unwrap();
+        let b = baseline(|| LightTree::build(&lights).unwrap());
+        assert_eq!(a.nodes(), b.nodes());
+        let moved: Vec<PointLight> = lights
+            .iter()
+            .map(|l| PointLight::new(l.position * 1.5 + Vec3::ONE, l.intensity))
+            .collect();
+        let (mut a, mut b) = (a, b);
+        a.refit(&moved).unwrap();
+        baseline(|| b.refit(&moved).unwrap());
+        assert_eq!(a.nodes(), b.nodes());
     }
 }

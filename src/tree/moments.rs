@@ -199,6 +199,7 @@ impl Moments {
 
     /// Sets these to the moments of `lights` about `centre`, summed
     /// directly.
+    #[inline(always)]
     pub(crate) fn set_to_lights(&mut self, lights: &[PointLight], centre: DVec3) {
         let out = self;
         *out = Self::ZERO;
@@ -226,6 +227,7 @@ impl Moments {
     }
 
     /// Sets every moment and bound to 0.
+    #[inline(always)]
     pub(crate) fn clear(&mut self) {
         *self = Self::ZERO;
     }
@@ -233,6 +235,7 @@ impl Moments {
     /// Adds these moments, taken about a centre `c'`, shifted to a centre
     /// `c` with `t = c' - c` (so `x - c = (x - c') + t`), into `sum`; the
     /// moments themselves are left shifted, their bounds unchanged.
+    #[inline(always)]
     pub(crate) fn shift_into(&mut self, t: DVec3, sum: &mut Self) {
         let m = &mut self.m;
         for (axis, tv) in t.to_array().into_iter().enumerate() {
@@ -273,6 +276,7 @@ impl Moments {
     /// The node statistics the moments give, for a node of `lights`
     /// members, channel intensities `intensity` and stored radius `radius`
     /// (the moments being about its stored centroid).
+    #[inline(always)]
     pub(crate) fn statistics(&self, intensity: DVec3, radius: f32, lights: usize) -> Statistics {
         let r = f64::from(radius);
         let mut out = Statistics {

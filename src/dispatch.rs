@@ -1,7 +1,8 @@
-//! Which compiled copy of the shading code runs: on `x86_64` processors
-//! with AVX2 (or AVX-512F, for the batch call's sums), copies compiled for
-//! them (wider vectors, three-operand instructions), picked at run time, so
-//! that a default build gets them.
+//! Which compiled copy of the hot code runs (the build's statistics, the
+//! cut, the batch call's shared cuts and sums): on `x86_64` processors with
+//! AVX2 (or AVX-512F, for the batch call's sums), copies compiled for them
+//! (wider vectors, three-operand instructions), picked at run time, so that
+//! a default build gets them.
 //! Rust never fuses a multiply and an add, and every other operation is
 //! exactly rounded the same way in both copies, so the results are the same
 //! bits (the tests compare them).
