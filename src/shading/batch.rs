@@ -950,11 +950,12 @@ impl<S: Shader> Shading<'_, S> {
         }
         let order = morton_order(queries);
         let runs = group_runs(queries, &order);
-        // The chunks of `shade_batch`, each with a session of its own.
+        // The chunks of `shade_batch`, each shaded by a session of the
+        // thread's own, reused from chunk to chunk (a chunk's results do not
+        // depend on what the session shaded before).
         let shaded: Vec<(Vec<(u32, ShadeResult)>, BatchStats)> = runs
             .par_chunks(CHUNK_RUNS)
-            .map(|runs| {
-                let mut shading = session();
+            .map_init(session, |shading, runs| {
                 let mut out = Vec::new();
                 let mut stats = BatchStats::default();
                 shading.shade_chunk(
