@@ -7,38 +7,35 @@
 //! exactly rounded the same way in both copies, so the results are the same
 //! bits (the tests compare them).
 
+/// Whether the processor has `$feature` (a literal), unless a test asked
+/// for the baseline copies on this thread.
+macro_rules! detected {
+    ($feature:tt) => {{
+        #[cfg(test)]
+        if BASELINE.with(core::cell::Cell::get) {
+            return false;
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            std::arch::is_x86_feature_detected!($feature)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            false
+        }
+    }};
+}
+
 /// Whether the copies compiled for AVX2 may run.
 #[inline]
 pub(crate) fn avx2() -> bool {
-    #[cfg(test)]
-    if BASELINE.with(core::cell::Cell::get) {
-        return false;
-    }
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
+    detected!("avx2")
 }
 
 /// Whether the copies compiled for AVX-512F may run.
 #[inline]
 pub(crate) fn avx512f() -> bool {
-    #[cfg(test)]
-    if BASELINE.with(core::cell::Cell::get) {
-        return false;
-    }
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx512f")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
+    detected!("avx512f")
 }
 
 #[cfg(test)]
