@@ -28,15 +28,18 @@
 //! same triangular kernel: the exact shift of the computed moments is off by
 //! at most `sum_k w_(l-k) err_k`, and `|y + t|_1 <= |y|_1 + tau` gives
 //! `abs'_l <= sum_k w_(l-k) abs_k`. Rounding: each shifted moment is a sum of
-//! products `T_d m_b` whose powers of `t` (from a difference of two `f32`
-//! values, rounded once), products and at most three one-axis stages of at
-//! most six terms, then at most eight children, take at most about `41`
-//! roundings, so the computed sum is within `41 * 2^-53` of the sum of the
+//! products `T_d m_b`. The powers `t^j / j!` take four roundings a step
+//! (the difference of two `f32` values behind `t`, the product with `t`,
+//! the rounded `1 / j` and the product with it), at most 20 for degree 5;
+//! the three one-axis stages add three products and at most five
+//! additions each, and at most eight children seven more: at most about 46
+//! roundings, so the computed sum is within `46 * 2^-53` of the sum of the
 //! terms' magnitudes, at most `sum_k w_(l-k) (abs_k + err_k)`;
-//! [`SHIFT_SLACK`] (`2^7 f64::EPSILON`) covers that with a factor six.
-//! A leaf's direct sums: each term `I_ik y^a / a!` takes at most 18
-//! roundings, and the recursive sum of `n` terms `n - 1` more, so
-//! `err_l = (n + 64) f64::EPSILON abs_l` covers them.
+//! [`SHIFT_SLACK`] (`2^7 f64::EPSILON = 256 * 2^-53`) covers that with a
+//! factor five. A leaf's direct sums: each term `I_ik y^a / a!` takes at
+//! most 23 roundings (20 for the powers, two products, the intensity), and
+//! the recursive sum of `n` terms `n - 1` more, so
+//! `err_l = (n + 64) f64::EPSILON abs_l` covers them with a factor two.
 //!
 //! Light coordinates and intensities are `f32` values, so every moment a
 //! node stores is far inside `f64`'s normal range (its harmonic norms are
