@@ -622,10 +622,14 @@ fn series_width(
     // mu_(m-1) <= sigma^(m-3) mu_2 and sigma^m, from m = 3.
     let mut mu_prev = mu2;
     let mut sigma_m = sigma * sigma * sigma;
-    for (d, q) in node.harmonic_norms.iter().enumerate() {
+    // A_m for m = 3, 4, 5, side by side (one vector square root where the
+    // processor has it).
+    let harmonics = [3.0f64, 4.0, 5.0]
+        .map(|m| c2 * (m + 1.0) * (m + 1.0) + nu2 * (0.5 * m * (m + 1.0)))
+        .map(f64::sqrt);
+    for (d, (q, harmonic)) in node.harmonic_norms.iter().zip(harmonics).enumerate() {
         let m = (d + 3) as f64;
         let q = q.as_dvec3() * sigma_m;
-        let harmonic = (c2 * (m + 1.0) * (m + 1.0) + nu2 * (0.5 * m * (m + 1.0))).sqrt();
         let across = q * (ac * (m + 1.0)) + mu_prev * (hperp * 0.5 * m * (m + 1.0));
         remainder += (q * harmonic).min(across);
         mu_prev *= sigma;

@@ -677,7 +677,7 @@ fn expand<S: Shader, V: Visibility>(
         let parent = next as u32;
         let outer = std::mem::take(&mut cut.settled);
         let magnitude = &mut nesting.fixed_magnitude;
-        cut.refine(&node, visible, 1.0, |mut e| {
+        cut.refine(&node, visible, 1.0, &mut |mut e: Entry| {
             e.key = e.key.min(key);
             if ramp.alpha(e.key) > 0.0 {
                 items.push(item(&e, parent, frame));

@@ -219,7 +219,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     // Children's priorities are capped at the parent's.
                     let frame = n.refined(&top, parent);
                     let outer = std::mem::take(&mut self.settled);
-                    self.refine(&node, visible, 1.0, |mut e| {
+                    self.refine(&node, visible, 1.0, &mut |mut e: Entry| {
                         e.key = e.key.min(top.key);
                         list.push(e);
                         n.pushed(&e, frame);
@@ -229,9 +229,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     n.settled(frame, settled);
                     n.finish(frame);
                 } else {
-                    self.refine(&node, visible, 1.0, |e| {
-                        list.push(e);
-                    });
+                    self.refine(&node, visible, 1.0, &mut *list);
                 }
             } else if let (Some(n), Some(parent)) = (nesting.as_deref_mut(), parent) {
                 let outer = std::mem::take(&mut self.settled);
@@ -440,7 +438,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         node: &Node,
         visible: bool,
         weight: f64,
-        mut pending: impl FnMut(Entry),
+        pending: &mut impl Pending,
     ) {
         if node.is_leaf() {
             let seen = if visible || V::ALWAYS_VISIBLE {
@@ -458,10 +456,31 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     // them (the budget counted them in `can_refine`).
                     self.sum_lights(c.lights(), Seen::Visible, weight);
                 } else if let Some(entry) = self.evaluate(child, visible, weight) {
-                    pending(entry);
+                    pending.pending(entry);
                 }
             }
         }
+    }
+}
+
+/// Where [`Cut::refine`] puts the entries that stay in the cut: the error
+/// list itself (pushed in place, inlined into each compiled copy of the
+/// cut), or a closure.
+pub(crate) trait Pending {
+    fn pending(&mut self, entry: Entry);
+}
+
+impl Pending for ErrorList {
+    #[inline(always)]
+    fn pending(&mut self, entry: Entry) {
+        self.push(entry);
+    }
+}
+
+impl<F: FnMut(Entry)> Pending for F {
+    #[inline(always)]
+    fn pending(&mut self, entry: Entry) {
+        self(entry);
     }
 }
 
