@@ -116,20 +116,20 @@ impl<'t, S: Shader> Shading<'t, S> {
         S: Accepts<M>,
     {
         threshold.check()?;
-        Ok(self.shade_checked(query.surface(), query.point(), &threshold, visibility))
+        Ok(self.shade_checked(query.surface(), query.point(), threshold, visibility))
     }
 
     /// [`shade_query`](Self::shade_query) after its checks: on `x86_64`
     /// processors with AVX2, a copy of the whole cut compiled for AVX2 (the
     /// same bits, see [`dispatch`](crate::dispatch)), elsewhere the baseline build.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (with the
-    // batch sum's wider copies and the prefetch hint in `tree::layout`).
+    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
+    // `dispatch`).
     #[allow(unsafe_code)]
     fn shade_checked<V: Visibility>(
         &mut self,
         surface: &Surface,
         point: Vec3,
-        threshold: &Threshold,
+        threshold: Threshold,
         visibility: V,
     ) -> ShadeResult {
         #[cfg(target_arch = "x86_64")]
@@ -149,7 +149,7 @@ impl<'t, S: Shader> Shading<'t, S> {
         &mut self,
         surface: &Surface,
         point: Vec3,
-        threshold: &Threshold,
+        threshold: Threshold,
         visibility: V,
     ) -> ShadeResult {
         self.shade_inlined(surface, point, threshold, visibility)
@@ -161,10 +161,9 @@ impl<'t, S: Shader> Shading<'t, S> {
         &mut self,
         surface: &Surface,
         point: Vec3,
-        threshold: &Threshold,
+        threshold: Threshold,
         visibility: V,
     ) -> ShadeResult {
-        let threshold = *threshold;
         let mut cut = Cut::new(
             self.tree,
             &self.shader,

@@ -101,8 +101,7 @@ impl Packed {
     /// cut guarantees it), so `D > 0`.
     // Calling the copies compiled for wider vectors once the processor is
     // known to have them is one of the crate's unsafe blocks (see
-    // `dispatch`; the others call the cut's AVX2 copies and the prefetch
-    // hint in `tree::layout`).
+    // `dispatch`).
     #[allow(unsafe_code)]
     pub(crate) fn sum(&self, point: DVec3, normal: DVec3) -> DVec3 {
         #[cfg(target_arch = "x86_64")]

@@ -204,24 +204,23 @@ impl Moments {
     /// directly.
     #[inline(always)]
     pub(crate) fn set_to_lights(&mut self, lights: &[PointLight], centre: DVec3) {
-        let out = self;
-        *out = Self::ZERO;
+        self.clear();
         for l in lights {
             let y = l.position.as_dvec3() - centre;
             let i = l.intensity.as_dvec3();
             let lanes = [i.x, i.y, i.z, 0.0];
             let (px, py, pz) = (scaled_powers(y.x), scaled_powers(y.y), scaled_powers(y.z));
             let values: [f64; MONOMIALS] = monomial_values!(px, py, pz);
-            for (acc, v) in out.m.iter_mut().zip(values) {
+            for (acc, v) in self.m.iter_mut().zip(values) {
                 mul_add(acc, &lanes, v);
             }
             let s = scaled_powers(y.x.abs() + y.y.abs() + y.z.abs());
-            for (acc, p) in out.abs.iter_mut().zip(s) {
+            for (acc, p) in self.abs.iter_mut().zip(s) {
                 mul_add(acc, &lanes, p);
             }
         }
         let slack = (lights.len() as f64 + 64.0) * f64::EPSILON;
-        for (abs, err) in out.abs.iter_mut().zip(out.err.iter_mut()) {
+        for (abs, err) in self.abs.iter_mut().zip(self.err.iter_mut()) {
             for (a, e) in abs.iter_mut().zip(err.iter_mut()) {
                 *a *= 1.0 + slack;
                 *e = *a * slack;
