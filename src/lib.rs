@@ -150,6 +150,7 @@ mod dispatch;
 mod error;
 mod geometry;
 mod lambert;
+mod lanes;
 mod light;
 pub mod numeric;
 mod phong;

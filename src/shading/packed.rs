@@ -32,7 +32,7 @@ struct NodeBlock {
 }
 
 /// The entries of a shared cut whose estimate is the degree-2 series
-/// ([`degree_two`](crate::lambert::degree_two)): nodes, and single lights
+/// (the Lambert bound's `degree_two_lanes`): nodes, and single lights
 /// above every tangent plane (whose series is their exact term `c0`, the
 /// moments being zero).
 #[derive(Debug, Default)]
@@ -91,7 +91,7 @@ impl Packed {
 
     /// The sum of every entry's degree-2 estimate at `point` with unit
     /// normal `normal`: the operations of
-    /// [`degree_two`](crate::lambert::degree_two) and of the node bound's
+    /// the Lambert bound's `degree_two_lanes` and of the node bound's
     /// scale `I kd / D^2`, lane by lane (for a light, whose moments are
     /// zero, the terms that vanish exactly are skipped: the same bits).
     /// Each lane adds its entries in order (at most `len / LANES + 1`

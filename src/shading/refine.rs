@@ -8,9 +8,9 @@ use super::blend::{NO_PARENT, Nesting};
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::result::Stop;
 use super::threshold::Threshold;
-use crate::geometry::Surface;
+use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, SUM_SLACK};
-use crate::shader::Shader;
+use crate::shader::{NodeEstimate, Shader};
 use crate::tree::{LightTree, NO_PLANE, Node};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 
@@ -314,11 +314,28 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// asked about only when the cut takes it.
     #[inline(always)]
     pub(crate) fn evaluate(&mut self, index: usize, visible: bool, weight: f64) -> Option<Entry> {
+        match self.enter(index, visible, weight) {
+            Entering::Done(entry) => entry,
+            Entering::Bound(cone) => {
+                let node = &self.tree.nodes[index];
+                let bound = self
+                    .shader
+                    .bound(&self.per_point, self.surface, node, &cone);
+                self.bounded(index, visible, weight, &bound)
+            }
+        }
+    }
+
+    /// The part of [`evaluate`](Self::evaluate) before the node bound: what
+    /// needs no bound is settled or returned, the rest is to be bounded
+    /// under its cone.
+    #[inline(always)]
+    fn enter(&mut self, index: usize, visible: bool, weight: f64) -> Entering {
         let node: &Node = &self.tree.nodes[index];
         if node.intensity == DVec3::ZERO {
             // Dark node: exactly zero whatever its geometry, even when its
             // ball holds the shading point; no query is needed.
-            return None;
+            return Entering::Done(None);
         }
         if let Some(plane) = self.tree.node_plane(index)
             && self.below_horizon(plane)
@@ -326,33 +343,38 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             // Every light lies at or below the tangent plane, where the
             // shader's model is exactly 0: settled without a bound.
             self.nodes += 1;
-            return None;
+            return Entering::Done(None);
         }
-        let seen = if visible || V::ALWAYS_VISIBLE {
-            Seen::Visible
-        } else {
-            Seen::Unknown
-        };
+        let seen = seen(visible || V::ALWAYS_VISIBLE);
         if node.radius == 0.0 {
             // A single light, or coincident lights (the build makes them one
             // leaf): exactly one light of the summed intensity at the
             // centroid, whatever their number.
             self.exact_light(node.centroid, node.intensity, seen, weight);
-            return None;
+            return Entering::Done(None);
         }
         self.nodes += 1;
-        let Some(cone) = node.cone(self.surface.point) else {
-            return Some(Entry::new(
+        match node.cone(self.surface.point) {
+            Some(cone) => Entering::Bound(cone),
+            None => Entering::Done(Some(Entry::new(
                 Class::Unbounded,
                 index as u32,
                 seen,
                 DVec3::ZERO,
                 DVec3::ZERO,
-            ));
-        };
-        let bound = self
-            .shader
-            .bound(&self.per_point, self.surface, node, &cone);
+            ))),
+        }
+    }
+
+    /// The part of [`evaluate`](Self::evaluate) after the node bound.
+    #[inline(always)]
+    fn bounded(
+        &mut self,
+        index: usize,
+        visible: bool,
+        weight: f64,
+        bound: &NodeEstimate,
+    ) -> Option<Entry> {
         let over = self
             .max_contribution
             .is_some_and(|m| bound.upper.max_element() > m);
@@ -361,6 +383,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         } else {
             Class::Error
         };
+        let seen = seen(visible || V::ALWAYS_VISIBLE);
         let entry = Entry::new(class, index as u32, seen, bound.estimate, bound.error());
         if entry.key <= 0.0 && !over {
             // Nothing to gain by refining (e.g. below the horizon).
@@ -393,13 +416,20 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// exactly); dark lights and lights behind the surface need no ray.
     #[inline(always)]
     fn exact_light(&mut self, position: Vec3, intensity: DVec3, seen: Seen, weight: f64) {
-        self.lights += 1;
         let value = self.shader.eval(
             &self.per_point,
             self.surface,
             position.as_dvec3(),
             intensity,
         );
+        self.settle_light(position, value, seen, weight);
+    }
+
+    /// [`exact_light`](Self::exact_light) after the evaluation, `value`
+    /// being the light's exact contribution.
+    #[inline(always)]
+    fn settle_light(&mut self, position: Vec3, value: DVec3, seen: Seen, weight: f64) {
+        self.lights += 1;
         if value == DVec3::ZERO {
             return;
         }
@@ -423,9 +453,16 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// [`exact_light`](Self::exact_light).
     #[inline(always)]
     fn sum_lights(&mut self, range: core::ops::Range<usize>, seen: Seen, weight: f64) {
-        for k in range {
-            let l = self.tree.lights[k];
-            self.exact_light(l.position, l.intensity.as_dvec3(), seen, weight);
+        const CHUNK: usize = 16;
+        let tree = self.tree;
+        let mut values = [DVec3::ZERO; CHUNK];
+        for lights in tree.lights[range].chunks(CHUNK) {
+            let values = &mut values[..lights.len()];
+            self.shader
+                .eval_lights(&self.per_point, self.surface, lights, values);
+            for (light, value) in lights.iter().zip(values.iter()) {
+                self.settle_light(light.position, *value, seen, weight);
+            }
         }
     }
 
@@ -449,17 +486,120 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             self.sum_lights(node.lights(), seen, weight);
         } else {
             let known = visible || V::ALWAYS_VISIBLE;
+            // Children to bound, bounded side by side once all are known.
+            let mut group = Group::default();
             for child in node.children() {
                 let c = &self.tree.nodes[child];
                 if known && self.sums_exactly(c) {
                     // Summing a few visible lights costs less than bounding
                     // them (the budget counted them in `can_refine`).
                     self.sum_lights(c.lights(), Seen::Visible, weight);
-                } else if let Some(entry) = self.evaluate(child, visible, weight) {
-                    pending.pending(entry);
+                    continue;
+                }
+                match self.enter(child, visible, weight) {
+                    Entering::Done(Some(entry)) => pending.pending(entry),
+                    Entering::Done(None) => {}
+                    Entering::Bound(cone) => {
+                        if group.len == GROUP {
+                            self.bound_group(&mut group, visible, weight, pending);
+                        }
+                        group.push(child as u32, cone);
+                    }
                 }
             }
+            self.bound_group(&mut group, visible, weight, pending);
         }
+    }
+
+    /// Bounds the nodes of `group` together ([`Shader::bound_nodes`]) and
+    /// empties it; entries that stay in the cut are passed to `pending`.
+    #[inline(always)]
+    fn bound_group(
+        &mut self,
+        group: &mut Group,
+        visible: bool,
+        weight: f64,
+        pending: &mut impl Pending,
+    ) {
+        let len = group.len;
+        if len == 0 {
+            return;
+        }
+        let tree = self.tree;
+        let nodes: [&Node; GROUP] = crate::lanes::array(&tree.nodes[0], |i| {
+            &tree.nodes[group.indices[i.min(len - 1)] as usize]
+        });
+        let mut bounds = [NodeEstimate::ZERO; GROUP];
+        self.shader.bound_nodes(
+            &self.per_point,
+            self.surface,
+            &nodes[..len],
+            &group.cones[..len],
+            &mut bounds[..len],
+        );
+        for (index, bound) in group.indices[..len].iter().zip(&bounds) {
+            if let Some(entry) = self.bounded(*index as usize, visible, weight, bound) {
+                pending.pending(entry);
+            }
+        }
+        group.len = 0;
+    }
+}
+
+/// The most children bounded together: an octree's.
+const GROUP: usize = 8;
+
+/// Children of a node waiting to be bounded together.
+struct Group {
+    len: usize,
+    indices: [u32; GROUP],
+    cones: [Cone; GROUP],
+}
+
+impl Default for Group {
+    #[inline(always)]
+    fn default() -> Self {
+        const NONE: Cone = Cone {
+            offset: DVec3::ZERO,
+            distance: 0.0,
+            inv_distance: 0.0,
+            axis: DVec3::ZERO,
+            radius: 0.0,
+            sin_half_angle: 0.0,
+            cos_half_angle: 0.0,
+        };
+        Self {
+            len: 0,
+            indices: [0; GROUP],
+            cones: [NONE; GROUP],
+        }
+    }
+}
+
+impl Group {
+    #[inline(always)]
+    fn push(&mut self, index: u32, cone: Cone) {
+        self.indices[self.len] = index;
+        self.cones[self.len] = cone;
+        self.len += 1;
+    }
+}
+
+/// What [`Cut::enter`] makes of a node entering the cut.
+enum Entering {
+    /// Settled, or an entry that needs no bound (`None`: nothing to keep).
+    Done(Option<Entry>),
+    /// To be bounded under this cone.
+    Bound(Cone),
+}
+
+/// How a node entering the cut is seen, from whether it is known visible.
+#[inline(always)]
+fn seen(known_visible: bool) -> Seen {
+    if known_visible {
+        Seen::Visible
+    } else {
+        Seen::Unknown
     }
 }
 

@@ -1,0 +1,215 @@
+//! `N` lanes of `f64`, operated on lane by lane: the node bounds are written
+//! once over this type and run with one lane (a single node) or eight (the
+//! children of a node, side by side). Every operation is the scalar one
+//! applied to each lane, so a lane's result is the same bits whatever `N`
+//! and whichever compiled copy runs; the loops are fixed-length and inlined,
+//! which the compiler turns into vector instructions (two 4-wide AVX2
+//! operations for eight lanes).
+
+use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub};
+
+/// `N` values of `f64`, one per lane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Lanes<const N: usize>(pub(crate) [f64; N]);
+
+impl<const N: usize> Lanes<N> {
+    /// The same value in every lane.
+    #[inline(always)]
+    pub(crate) const fn splat(x: f64) -> Self {
+        Self([x; N])
+    }
+
+    /// Lane `i` holds `f(i)`.
+    #[inline(always)]
+    pub(crate) fn from_fn(f: impl FnMut(usize) -> f64) -> Self {
+        Self(array(0.0, f))
+    }
+
+    #[inline(always)]
+    fn map(self, f: impl Fn(f64) -> f64) -> Self {
+        Self(array(0.0, |i| f(self.0[i])))
+    }
+
+    #[inline(always)]
+    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        Self(array(0.0, |i| f(self.0[i], other.0[i])))
+    }
+
+    /// Per lane `if a < b { a } else { b }`: the smaller, and `b` if either
+    /// is NaN (like `f64::min` when `b` is not NaN).
+    #[inline(always)]
+    pub(crate) fn min(self, b: Self) -> Self {
+        self.zip(b, |a, b| if a < b { a } else { b })
+    }
+
+    /// Per lane `if a > b { a } else { b }`: the larger, and `b` if either
+    /// is NaN (like `f64::max` when `b` is not NaN).
+    #[inline(always)]
+    pub(crate) fn max(self, b: Self) -> Self {
+        self.zip(b, |a, b| if a > b { a } else { b })
+    }
+
+    #[inline(always)]
+    pub(crate) fn abs(self) -> Self {
+        self.map(f64::abs)
+    }
+
+    #[inline(always)]
+    pub(crate) fn sqrt(self) -> Self {
+        self.map(f64::sqrt)
+    }
+
+    /// `1 / x` per lane (one correctly rounded division).
+    #[inline(always)]
+    pub(crate) fn recip(self) -> Self {
+        1.0 / self
+    }
+
+    /// Per lane `if a >= b { x } else { y }`.
+    #[inline(always)]
+    pub(crate) fn select_ge(a: Self, b: Self, x: Self, y: Self) -> Self {
+        Self(array(
+            0.0,
+            |i| if a.0[i] >= b.0[i] { x.0[i] } else { y.0[i] },
+        ))
+    }
+}
+
+/// `[f(0), .., f(N - 1)]`, by a plain loop that the compiler unrolls and
+/// inlines into each compiled copy of the caller (`core::array::from_fn`
+/// goes through calls that stay out of line there).
+#[inline(always)]
+pub(crate) fn array<T: Copy, const N: usize>(fill: T, mut f: impl FnMut(usize) -> T) -> [T; N] {
+    let mut out = [fill; N];
+    for (i, out) in out.iter_mut().enumerate() {
+        *out = f(i);
+    }
+    out
+}
+
+macro_rules! binary {
+    ($trait:ident, $method:ident, $op:tt) => {
+        impl<const N: usize> $trait for Lanes<N> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, b: Self) -> Self {
+                self.zip(b, |a, b| a $op b)
+            }
+        }
+        impl<const N: usize> $trait<f64> for Lanes<N> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, b: f64) -> Self {
+                self.map(|a| a $op b)
+            }
+        }
+        impl<const N: usize> $trait<Lanes<N>> for f64 {
+            type Output = Lanes<N>;
+            #[inline(always)]
+            fn $method(self, b: Lanes<N>) -> Lanes<N> {
+                b.map(|b| self $op b)
+            }
+        }
+    };
+}
+
+binary!(Add, add, +);
+binary!(Sub, sub, -);
+binary!(Mul, mul, *);
+binary!(Div, div, /);
+
+impl<const N: usize> Neg for Lanes<N> {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        self.map(|a| -a)
+    }
+}
+
+impl<const N: usize> AddAssign for Lanes<N> {
+    #[inline(always)]
+    fn add_assign(&mut self, b: Self) {
+        *self = *self + b;
+    }
+}
+
+impl<const N: usize> MulAssign<f64> for Lanes<N> {
+    #[inline(always)]
+    fn mul_assign(&mut self, b: f64) {
+        *self = *self * b;
+    }
+}
+
+impl<const N: usize> MulAssign for Lanes<N> {
+    #[inline(always)]
+    fn mul_assign(&mut self, b: Self) {
+        *self = *self * b;
+    }
+}
+
+/// A vector of three [`Lanes`], with `glam`'s order of operations.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Vec3Lanes<const N: usize> {
+    pub(crate) x: Lanes<N>,
+    pub(crate) y: Lanes<N>,
+    pub(crate) z: Lanes<N>,
+}
+
+impl<const N: usize> Vec3Lanes<N> {
+    /// Lane `i` holds `f(i)`.
+    #[inline(always)]
+    pub(crate) fn from_fn(mut f: impl FnMut(usize) -> [f64; 3]) -> Self {
+        let v: [[f64; 3]; N] = array([0.0; 3], &mut f);
+        Self {
+            x: Lanes::from_fn(|i| v[i][0]),
+            y: Lanes::from_fn(|i| v[i][1]),
+            z: Lanes::from_fn(|i| v[i][2]),
+        }
+    }
+
+    /// `(x * b.x + y * b.y) + z * b.z`, as `DVec3::dot`.
+    #[inline(always)]
+    pub(crate) fn dot(self, b: Self) -> Lanes<N> {
+        self.x * b.x + self.y * b.y + self.z * b.z
+    }
+
+    /// The dot product with one vector for every lane, as `DVec3::dot`.
+    #[inline(always)]
+    pub(crate) fn dot_with(self, b: [f64; 3]) -> Lanes<N> {
+        self.x * b[0] + self.y * b[1] + self.z * b[2]
+    }
+
+    /// `x + y + z`, as `DVec3::element_sum`.
+    #[inline(always)]
+    pub(crate) fn element_sum(self) -> Lanes<N> {
+        self.x + self.y + self.z
+    }
+
+    #[inline(always)]
+    pub(crate) fn abs(self) -> Self {
+        Self {
+            x: self.x.abs(),
+            y: self.y.abs(),
+            z: self.z.abs(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Lanes;
+
+    /// `min` and `max` agree with `f64::min` and `f64::max` whenever the
+    /// second operand is a number, NaN first operands included.
+    #[test]
+    fn min_and_max_match_the_scalar_ones_for_a_numeric_second_operand() {
+        let values = [f64::NAN, -1.0, 0.0, 0.5, f64::INFINITY, f64::NEG_INFINITY];
+        for a in values {
+            for b in values.into_iter().filter(|b| !b.is_nan()) {
+                let (x, y) = (Lanes::<1>([a]), Lanes::<1>([b]));
+                assert_eq!(x.min(y).0[0], a.min(b), "min({a}, {b})");
+                assert_eq!(x.max(y).0[0], a.max(b), "max({a}, {b})");
+            }
+        }
+    }
+}
