@@ -385,10 +385,11 @@ impl Lambert {
         let normal = surface.given_normal.as_dvec3();
         let n2 = normal.length_squared();
         let p = surface.point;
-        let mut lights = lights.chunks_exact(L);
-        let mut outs = out.chunks_exact_mut(L);
-        for (chunk, out) in (&mut lights).zip(&mut outs) {
-            let position = Vec3Lanes::<L>::from_fn(|i| chunk[i].position.as_dvec3().to_array());
+        for (chunk, out) in lights.chunks(L).zip(out.chunks_mut(L)) {
+            // A short last chunk repeats its last light in the unused lanes.
+            let last = chunk.len() - 1;
+            let position =
+                Vec3Lanes::<L>::from_fn(|i| chunk[i.min(last)].position.as_dvec3().to_array());
             let d = Vec3Lanes {
                 x: position.x - p.x,
                 y: position.y - p.y,
@@ -404,11 +405,11 @@ impl Lambert {
             let magnitude = terms.abs().element_sum();
             let d2 = d.dot(d);
             let ratio = height / (d2 * (n2 * d2).sqrt());
-            for i in 0..L {
+            for (i, (light, out)) in chunk.iter().zip(out).enumerate() {
                 let h = height.0[i];
-                out[i] = if h.abs() >= NAIVE_DOT_ACCEPT * magnitude.0[i] {
+                *out = if h.abs() >= NAIVE_DOT_ACCEPT * magnitude.0[i] {
                     if h > 0.0 {
-                        chunk[i].intensity.as_dvec3() * self.kd * ratio.0[i]
+                        light.intensity.as_dvec3() * self.kd * ratio.0[i]
                     } else {
                         DVec3::ZERO
                     }
@@ -416,19 +417,11 @@ impl Lambert {
                     self.eval(
                         &(),
                         surface,
-                        chunk[i].position.as_dvec3(),
-                        chunk[i].intensity.as_dvec3(),
+                        light.position.as_dvec3(),
+                        light.intensity.as_dvec3(),
                     )
                 };
             }
-        }
-        for (light, out) in lights.remainder().iter().zip(outs.into_remainder()) {
-            *out = self.eval(
-                &(),
-                surface,
-                light.position.as_dvec3(),
-                light.intensity.as_dvec3(),
-            );
         }
     }
 
