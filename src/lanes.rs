@@ -193,6 +193,57 @@ impl<const N: usize> Vec3Lanes<N> {
             z: self.z.abs(),
         }
     }
+
+    /// `self - p`, the same point subtracted in every lane.
+    #[inline(always)]
+    pub(crate) fn minus(self, p: [f64; 3]) -> Self {
+        Self {
+            x: self.x - p[0],
+            y: self.y - p[1],
+            z: self.z - p[2],
+        }
+    }
+
+    /// `n - s v` per lane, for one vector `n`, as `n - s * v` with `DVec3`.
+    #[inline(always)]
+    pub(crate) fn scaled_from(n: [f64; 3], s: Lanes<N>, v: Self) -> Self {
+        Self {
+            x: n[0] - s * v.x,
+            y: n[1] - s * v.y,
+            z: n[2] - s * v.z,
+        }
+    }
+
+    /// The centre `(lo + hi) / 2` and half extent `(hi - lo) / 2` of boxes.
+    #[inline(always)]
+    pub(crate) fn centre_and_half(lo: Self, hi: Self) -> (Self, Self) {
+        let f = |lo: Lanes<N>, hi: Lanes<N>| (0.5 * (lo + hi), 0.5 * (hi - lo));
+        let ((cx, hx), (cy, hy), (cz, hz)) = (f(lo.x, hi.x), f(lo.y, hi.y), f(lo.z, hi.z));
+        (
+            Self {
+                x: cx,
+                y: cy,
+                z: cz,
+            },
+            Self {
+                x: hx,
+                y: hy,
+                z: hz,
+            },
+        )
+    }
+}
+
+impl<const N: usize> Sub for Vec3Lanes<N> {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, b: Self) -> Self {
+        Self {
+            x: self.x - b.x,
+            y: self.y - b.y,
+            z: self.z - b.z,
+        }
+    }
 }
 
 #[cfg(test)]

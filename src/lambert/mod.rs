@@ -390,11 +390,7 @@ impl Lambert {
             let last = chunk.len() - 1;
             let position =
                 Vec3Lanes::<L>::from_fn(|i| chunk[i.min(last)].position.as_dvec3().to_array());
-            let d = Vec3Lanes {
-                x: position.x - p.x,
-                y: position.y - p.y,
-                z: position.z - p.z,
-            };
+            let d = position.minus(p.to_array());
             // Plain f64 heights, accepted per lane as dot_of_difference does.
             let terms = Vec3Lanes {
                 x: normal.x * d.x,
@@ -577,21 +573,8 @@ impl<const N: usize> Prefix<N> {
         let box_min = Vec3Lanes::from_fn(|i| nodes[i].aabb.min.as_dvec3().to_array());
         let box_max = Vec3Lanes::from_fn(|i| nodes[i].aabb.max.as_dvec3().to_array());
         let p = surface.point;
-        let centre = Vec3Lanes {
-            x: 0.5 * (box_min.x + box_max.x),
-            y: 0.5 * (box_min.y + box_max.y),
-            z: 0.5 * (box_min.z + box_max.z),
-        };
-        let half = Vec3Lanes {
-            x: 0.5 * (box_max.x - box_min.x),
-            y: 0.5 * (box_max.y - box_min.y),
-            z: 0.5 * (box_max.z - box_min.z),
-        };
-        let from_point = Vec3Lanes {
-            x: centre.x - p.x,
-            y: centre.y - p.y,
-            z: centre.z - p.z,
-        };
+        let (centre, half) = Vec3Lanes::centre_and_half(box_min, box_max);
+        let from_point = centre.minus(p.to_array());
         let middle = from_point.dot_with(n.to_array());
         let reach = half.dot_with(n.abs().to_array());
         let largest = |v: Vec3Lanes<N>| v.x.max(v.y.max(v.z));
@@ -734,35 +717,9 @@ fn series_lanes<const N: usize>(
     let nu = g.sin_c + SERIES_SLACK;
     // hperp / D: the box's reach across the axis, from the box corners
     // relative to c (each difference one rounding of a value <= R).
-    let nperp = Vec3Lanes {
-        x: n.x - c0 * uh.x,
-        y: n.y - c0 * uh.y,
-        z: n.z - c0 * uh.z,
-    };
+    let nperp = Vec3Lanes::scaled_from(n.to_array(), c0, uh);
     let c = Vec3Lanes::from_fn(|i| nodes[i].centroid.as_dvec3().to_array());
-    let (lo, hi) = (g.box_min, g.box_max);
-    let (lo, hi) = (
-        Vec3Lanes {
-            x: lo.x - c.x,
-            y: lo.y - c.y,
-            z: lo.z - c.z,
-        },
-        Vec3Lanes {
-            x: hi.x - c.x,
-            y: hi.y - c.y,
-            z: hi.z - c.z,
-        },
-    );
-    let middle = Vec3Lanes {
-        x: 0.5 * (lo.x + hi.x),
-        y: 0.5 * (lo.y + hi.y),
-        z: 0.5 * (lo.z + hi.z),
-    };
-    let half = Vec3Lanes {
-        x: 0.5 * (hi.x - lo.x),
-        y: 0.5 * (hi.y - lo.y),
-        z: 0.5 * (hi.z - lo.z),
-    };
+    let (middle, half) = Vec3Lanes::centre_and_half(g.box_min - c, g.box_max - c);
     let reach = nperp.dot(middle).abs() + nperp.abs().dot(half);
     let radius = Lanes::from_fn(|i| cones[i].radius);
     let hperp = (reach + SERIES_SLACK * radius) * inv_d;

@@ -113,11 +113,7 @@ pub(super) fn degree_two_lanes<const N: usize>(
     nodes: &[&Node; N],
 ) -> Rgb<N> {
     let c0 = uh.dot_with(n.to_array());
-    let grad = Vec3Lanes {
-        x: n.x - 3.0 * c0 * uh.x,
-        y: n.y - 3.0 * c0 * uh.y,
-        z: n.z - 3.0 * c0 * uh.z,
-    };
+    let grad = Vec3Lanes::scaled_from(n.to_array(), 3.0 * c0, uh);
     // The degree-2 bracket is linear in S: one weight per stored entry
     // [xx, yy, zz, xy, xz, yz], shared by the three channels.
     let (a, b) = (15.0 * c0, 3.0 * c0);
