@@ -478,12 +478,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         pending: &mut impl Pending,
     ) {
         if node.is_leaf() {
-            let seen = if visible || V::ALWAYS_VISIBLE {
-                Seen::Visible
-            } else {
-                Seen::Unknown
-            };
-            self.sum_lights(node.lights(), seen, weight);
+            self.sum_lights(node.lights(), seen(visible || V::ALWAYS_VISIBLE), weight);
         } else {
             let known = visible || V::ALWAYS_VISIBLE;
             // Children to bound, bounded side by side once all are known.
