@@ -108,7 +108,8 @@ pub trait Shader {
 
     /// Evaluates several lights: `out[i]` receives exactly what
     /// [`eval`](Self::eval) gives for `lights[i]` (both slices have the same
-    /// length). The cut calls it with a leaf's lights, so that a shader can
+    /// length; past the shorter, entries are ignored and `out` is left as it
+    /// was). The cut calls it with a leaf's lights, so that a shader can
     /// evaluate them side by side in vector registers, as [`Lambert`] does;
     /// the default evaluates them one by one.
     ///
@@ -133,7 +134,8 @@ pub trait Shader {
 
     /// Bounds several nodes seen from one point: `out[i]` receives exactly
     /// what [`bound`](Self::bound) gives for `nodes[i]` under `cones[i]`
-    /// (the three slices have the same length). The cut calls it with the
+    /// (the three slices have the same length; past the shortest, entries
+    /// are ignored and `out` is left as it was). The cut calls it with the
     /// children of a node that enter it together, so that a shader can
     /// bound them side by side in vector registers, as [`Lambert`]'s series
     /// bound does; the default bounds them one by one.

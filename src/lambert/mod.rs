@@ -490,11 +490,12 @@ impl Lambert {
         cones: &[Cone],
         out: &mut [NodeEstimate],
     ) {
-        let last = nodes.len().min(cones.len()).max(1) - 1;
+        let count = nodes.len().min(cones.len());
+        let last = count.max(1) - 1;
         let node_lanes: [&Node; N] = array(nodes[0], |i| nodes[i.min(last)]);
         let cone_lanes: [&Cone; N] = array(&cones[0], |i| &cones[i.min(last)]);
         let estimates = self.bound_lanes(surface, &node_lanes, &cone_lanes);
-        for (out, estimate) in out.iter_mut().zip(estimates) {
+        for (out, estimate) in out.iter_mut().zip(estimates).take(count) {
             *out = estimate;
         }
     }
@@ -969,5 +970,38 @@ mod tests {
             compared += check(&glossy, &tree, &surface);
         }
         assert!(compared > 10_000, "{compared} nodes compared");
+    }
+
+    /// Slices of different lengths: entries past the shortest are ignored
+    /// and their outputs left alone, with no panic.
+    #[test]
+    fn mismatched_slices_leave_the_extra_outputs_alone() {
+        let lights: Vec<PointLight> = (0..200)
+            .map(|i| PointLight::new(Vec3::new(i as f32, (i % 7) as f32, 3.0), Vec3::ONE))
+            .collect();
+        let tree = LightTree::build(&lights).unwrap();
+        let surface = Surface::new(Vec3::new(-5.0, 0.0, 0.0), Vec3::Z, None).unwrap();
+        let nodes: Vec<&Node> = tree.nodes().iter().take(6).collect();
+        let cones: Vec<Cone> = nodes
+            .iter()
+            .map(|n| n.cone(surface.point).unwrap())
+            .collect();
+        let lambert = Lambert::new(Vec3::ONE);
+        let mark = NodeEstimate::new(DVec3::splat(-1.0), DVec3::splat(-1.0), DVec3::splat(-1.0));
+        for (n, c) in [(6, 2), (2, 6), (6, 5), (1, 0), (0, 1)] {
+            let mut out = [mark; 6];
+            lambert.bound_nodes(&(), &surface, &nodes[..n], &cones[..c], &mut out);
+            for (i, out) in out.iter().enumerate() {
+                if i < n.min(c) {
+                    assert_eq!(*out, lambert.bound(&(), &surface, nodes[i], &cones[i]));
+                } else {
+                    assert_eq!(*out, mark, "entry {i} of {n} nodes and {c} cones");
+                }
+            }
+        }
+        let mut out = [DVec3::splat(-1.0); 5];
+        lambert.eval_lights(&(), &surface, &lights[..3], &mut out);
+        assert_eq!(out[3], DVec3::splat(-1.0));
+        assert!(out[..3].iter().all(|v| v.min_element() >= 0.0));
     }
 }
