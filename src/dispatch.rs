@@ -58,19 +58,11 @@ mod tests {
     use glam::Vec3;
 
     use super::baseline;
+    use crate::testing::uniform;
     use crate::{
         BoundKind, Combined, Lambert, LightTree, Phong, PointLight, Query, ShadeResult, Threshold,
         Unoccluded,
     };
-
-    /// A small generator, so that the lights and points are the same in both
-    /// copies' runs.
-    fn uniform(state: &mut u64) -> f32 {
-        *state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (*state >> 40) as f32 / (1u64 << 24) as f32
-    }
 
     fn lights(count: usize) -> Vec<PointLight> {
         let mut state = 7;

@@ -156,6 +156,8 @@ pub mod numeric;
 mod phong;
 mod shader;
 mod shading;
+#[cfg(test)]
+mod testing;
 mod tree;
 mod visibility;
 

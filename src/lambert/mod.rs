@@ -937,12 +937,7 @@ mod tests {
     #[test]
     fn nodes_bounded_together_give_the_bits_of_each_alone() {
         let mut state = 3u64;
-        let mut u = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut u = || crate::testing::uniform(&mut state);
         let lights: Vec<PointLight> = (0..4000)
             .map(|_| {
                 let p = Vec3::new(u() * 40.0 - 20.0, u() * 40.0 - 20.0, u() * 6.0);

@@ -646,12 +646,7 @@ mod copies {
     #[test]
     fn both_copies_of_the_build_give_the_same_nodes() {
         let mut state = 3u64;
-        let mut uniform = move || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut uniform = move || crate::testing::uniform(&mut state);
         let lights: Vec<PointLight> = (0..5000)
             .map(|_| {
                 let p = Vec3::new(uniform() * 100.0, uniform() * 100.0, uniform() * 3.0);
