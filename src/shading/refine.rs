@@ -45,6 +45,9 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     /// The last plane asked about and whether it lies at or below the
     /// tangent plane (a coplanar node's descendants share its plane).
     dark_plane: (u32, bool),
+    /// Children of the node being refined, waiting to be bounded together
+    /// (kept here so that it is set up once per call, not per refinement).
+    group: Group,
 }
 
 /// How the error list's loop ended.
@@ -91,6 +94,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             point_queries: 0,
             horizon: shader.horizon(surface),
             dark_plane: (NO_PLANE, false),
+            group: Group::default(),
         }
     }
 
@@ -481,8 +485,8 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             self.sum_lights(node.lights(), seen(visible || V::ALWAYS_VISIBLE), weight);
         } else {
             let known = visible || V::ALWAYS_VISIBLE;
-            // Children to bound, bounded side by side once all are known.
-            let mut group = Group::default();
+            // Children to bound go into `self.group`, bounded side by side
+            // once all are known.
             for child in node.children() {
                 let c = &self.tree.nodes[child];
                 if known && self.sums_exactly(c) {
@@ -495,49 +499,44 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     Entering::Done(Some(entry)) => pending.pending(entry),
                     Entering::Done(None) => {}
                     Entering::Bound(cone) => {
-                        if group.len == GROUP {
-                            self.bound_group(&mut group, visible, weight, pending);
+                        if self.group.len == GROUP {
+                            self.bound_group(visible, weight, pending);
                         }
-                        group.push(child as u32, cone);
+                        self.group.push(child as u32, cone);
                     }
                 }
             }
-            self.bound_group(&mut group, visible, weight, pending);
+            self.bound_group(visible, weight, pending);
         }
     }
 
-    /// Bounds the nodes of `group` together ([`Shader::bound_nodes`]) and
-    /// empties it; entries that stay in the cut are passed to `pending`.
+    /// Bounds the nodes waiting in `self.group` together
+    /// ([`Shader::bound_nodes`]) and empties it; entries that stay in the
+    /// cut are passed to `pending`.
     #[inline(always)]
-    fn bound_group(
-        &mut self,
-        group: &mut Group,
-        visible: bool,
-        weight: f64,
-        pending: &mut impl Pending,
-    ) {
-        let len = group.len;
+    fn bound_group(&mut self, visible: bool, weight: f64, pending: &mut impl Pending) {
+        let len = self.group.len;
         if len == 0 {
             return;
         }
-        let tree = self.tree;
+        let (tree, group) = (self.tree, &mut self.group);
         let nodes: [&Node; GROUP] = crate::lanes::array(&tree.nodes[0], |i| {
             &tree.nodes[group.indices[i.min(len - 1)] as usize]
         });
-        let mut bounds = [NodeEstimate::ZERO; GROUP];
         self.shader.bound_nodes(
             &self.per_point,
             self.surface,
             &nodes[..len],
             &group.cones[..len],
-            &mut bounds[..len],
+            &mut group.bounds[..len],
         );
-        for (index, bound) in group.indices[..len].iter().zip(&bounds) {
-            if let Some(entry) = self.bounded(*index as usize, visible, weight, bound) {
+        group.len = 0;
+        for i in 0..len {
+            let (index, bound) = (self.group.indices[i], self.group.bounds[i]);
+            if let Some(entry) = self.bounded(index as usize, visible, weight, &bound) {
                 pending.pending(entry);
             }
         }
-        group.len = 0;
     }
 }
 
@@ -549,6 +548,8 @@ struct Group {
     len: usize,
     indices: [u32; GROUP],
     cones: [Cone; GROUP],
+    /// Their bounds, once bounded.
+    bounds: [NodeEstimate; GROUP],
 }
 
 impl Default for Group {
@@ -567,6 +568,7 @@ impl Default for Group {
             len: 0,
             indices: [0; GROUP],
             cones: [NONE; GROUP],
+            bounds: [NodeEstimate::ZERO; GROUP],
         }
     }
 }
