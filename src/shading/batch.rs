@@ -67,8 +67,12 @@ const BUDGET_SHARE: f64 = 0.4;
 const MIN_BUDGET_PER_POINT: u64 = 32;
 /// Groups shaded with one running estimate of the cost of a point shaded
 /// alone, started afresh for each chunk (so that a batch shaded over
-/// threads, chunk by chunk, gives the same results).
-const CHUNK_RUNS: usize = 16;
+/// threads, chunk by chunk, gives the same results). Chunks are what the
+/// threads share out, so they are small: a few groups near the camera can
+/// cost a quarter of a frame, and with 16 groups a chunk that one chunk
+/// kept the second of two threads waiting (1.55-1.66x on two cores against
+/// 1.87-1.90x with 4, the street city at 1%; one thread's time unchanged).
+const CHUNK_RUNS: usize = 4;
 /// Entries a point sums over a shared cut in the time of one shared node
 /// bound (measured: about 50 instructions an entry, 1,500 a bound).
 const ENTRIES_PER_BOUND: u64 = 32;
