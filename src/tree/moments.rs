@@ -100,21 +100,68 @@ const INDEX: [[[usize; DEGREE + 1]; DEGREE + 1]; DEGREE + 1] = {
     out
 };
 
-/// The 56 values `px[a_x] py[a_y] pz[a_z]`, in the order of [`EXPONENTS`]
-/// (straight-line code: no table lookups in the leaves' loop).
+/// The 56 products `px[a_x] py[a_y] pz[a_z]`, lane by lane, in the order of
+/// [`EXPONENTS`] (straight-line code: no table lookups in the leaves'
+/// loop).
 macro_rules! monomial_values {
     ($px:ident, $py:ident, $pz:ident) => {
         monomial_values!(@ $px, $py, $pz; (0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (2, 0, 0), (1, 1, 0), (1, 0, 1), (0, 2, 0), (0, 1, 1), (0, 0, 2), (3, 0, 0), (2, 1, 0), (2, 0, 1), (1, 2, 0), (1, 1, 1), (1, 0, 2), (0, 3, 0), (0, 2, 1), (0, 1, 2), (0, 0, 3), (4, 0, 0), (3, 1, 0), (3, 0, 1), (2, 2, 0), (2, 1, 1), (2, 0, 2), (1, 3, 0), (1, 2, 1), (1, 1, 2), (1, 0, 3), (0, 4, 0), (0, 3, 1), (0, 2, 2), (0, 1, 3), (0, 0, 4), (5, 0, 0), (4, 1, 0), (4, 0, 1), (3, 2, 0), (3, 1, 1), (3, 0, 2), (2, 3, 0), (2, 2, 1), (2, 1, 2), (2, 0, 3), (1, 4, 0), (1, 3, 1), (1, 2, 2), (1, 1, 3), (1, 0, 4), (0, 5, 0), (0, 4, 1), (0, 3, 2), (0, 2, 3), (0, 1, 4), (0, 0, 5))
     };
     (@ $px:ident, $py:ident, $pz:ident; $(($a:literal, $b:literal, $c:literal)),*) => {
-        [$($px[$a] * $py[$b] * $pz[$c]),*]
+        [$(product(&$px[$a], &$py[$b], &$pz[$c])),*]
     };
+}
+
+/// Lights a leaf's sums take side by side.
+const LIGHT_LANES: usize = 4;
+
+type LightLanes = [f64; LIGHT_LANES];
+
+/// `a b c`, lane by lane.
+#[inline(always)]
+fn product(a: &LightLanes, b: &LightLanes, c: &LightLanes) -> LightLanes {
+    let mut out = [0.0; LIGHT_LANES];
+    for k in 0..LIGHT_LANES {
+        out[k] = a[k] * b[k] * c[k];
+    }
+    out
+}
+
+/// [`scaled_powers`] lane by lane.
+#[inline(always)]
+fn scaled_power_lanes(x: &LightLanes) -> [LightLanes; DEGREE + 1] {
+    let mut out = [[1.0; LIGHT_LANES]; DEGREE + 1];
+    for p in 1..=DEGREE {
+        for k in 0..LIGHT_LANES {
+            out[p][k] = out[p - 1][k] * x[k] * RECIPROCALS[p];
+        }
+    }
+    out
+}
+
+/// `acc[ch] += v * i[ch]` per channel, lane by lane.
+#[inline(always)]
+fn add_products(acc: &mut [LightLanes; 3], v: &LightLanes, i: &[LightLanes; 3]) {
+    for (acc, i) in acc.iter_mut().zip(i) {
+        for k in 0..LIGHT_LANES {
+            acc[k] += v[k] * i[k];
+        }
+    }
+}
+
+/// The lanes' sum, pairwise.
+#[inline(always)]
+fn lane_sum(x: &LightLanes) -> f64 {
+    (x[0] + x[1]) + (x[2] + x[3])
 }
 
 /// Per axis, the steps of a shift along it: `(target, source, power)` with
 /// `m[target] += t^power / power! * m[source]`, the source being the target
 /// with `power` fewer along the axis; targets by decreasing index, so that
-/// in place every source is read before it is shifted itself.
+/// in place every source is read before it is shifted itself. The shifts
+/// themselves run the lists of [`shift_steps`], which a test compares with
+/// this table.
+#[cfg(test)]
 const SHIFT_STEPS: [[(u8, u8, u8); 70]; 3] = {
     let mut out = [[(0u8, 0u8, 0u8); 70]; 3];
     let mut axis = 0;
@@ -142,6 +189,66 @@ const SHIFT_STEPS: [[(u8, u8, u8); 70]; 3] = {
     }
     out
 };
+
+/// A shift along one axis as straight-line code (the indices constants):
+/// per step `(target, source, power)`, `m[target] += t^power / power! *
+/// m[source]`, the source being the target with `power` fewer along the
+/// axis; targets by decreasing index, so that in place every source is read
+/// before it is shifted itself (a test checks the lists against a table
+/// built from that rule).
+macro_rules! shift_steps {
+    ($name:ident, $table:ident: $(($t:literal, $s:literal, $p:literal)),*) => {
+        /// One axis's steps, `w` the scaled powers of the offset along it.
+        #[inline(always)]
+        fn $name(m: &mut [Lanes; MONOMIALS], w: &[f64; DEGREE + 1]) {
+            $({
+                let from = m[$s];
+                mul_add(&mut m[$t], &from, w[$p]);
+            })*
+        }
+        #[cfg(test)]
+        const $table: [(u8, u8, u8); 70] = [$(($t, $s, $p)),*];
+    };
+}
+
+shift_steps!(shift_along_x, SHIFT_X:
+    (49, 34, 1), (48, 33, 1), (47, 32, 1), (46, 31, 1), (45, 30, 1), (44, 19, 2), (44, 29, 1),
+    (43, 18, 2), (43, 28, 1), (42, 17, 2), (42, 27, 1), (41, 16, 2), (41, 26, 1), (40, 9, 3),
+    (40, 15, 2), (40, 25, 1), (39, 8, 3), (39, 14, 2), (39, 24, 1), (38, 7, 3), (38, 13, 2),
+    (38, 23, 1), (37, 3, 4), (37, 6, 3), (37, 12, 2), (37, 22, 1), (36, 2, 4), (36, 5, 3),
+    (36, 11, 2), (36, 21, 1), (35, 0, 5), (35, 1, 4), (35, 4, 3), (35, 10, 2), (35, 20, 1),
+    (29, 19, 1), (28, 18, 1), (27, 17, 1), (26, 16, 1), (25, 9, 2), (25, 15, 1), (24, 8, 2),
+    (24, 14, 1), (23, 7, 2), (23, 13, 1), (22, 3, 3), (22, 6, 2), (22, 12, 1), (21, 2, 3),
+    (21, 5, 2), (21, 11, 1), (20, 0, 4), (20, 1, 3), (20, 4, 2), (20, 10, 1), (15, 9, 1),
+    (14, 8, 1), (13, 7, 1), (12, 3, 2), (12, 6, 1), (11, 2, 2), (11, 5, 1), (10, 0, 3),
+    (10, 1, 2), (10, 4, 1), (6, 3, 1), (5, 2, 1), (4, 0, 2), (4, 1, 1), (1, 0, 1)
+);
+
+shift_steps!(shift_along_y, SHIFT_Y:
+    (54, 34, 1), (53, 19, 2), (53, 33, 1), (52, 9, 3), (52, 18, 2), (52, 32, 1), (51, 3, 4),
+    (51, 8, 3), (51, 17, 2), (51, 31, 1), (50, 0, 5), (50, 2, 4), (50, 7, 3), (50, 16, 2),
+    (50, 30, 1), (48, 29, 1), (47, 15, 2), (47, 28, 1), (46, 6, 3), (46, 14, 2), (46, 27, 1),
+    (45, 1, 4), (45, 5, 3), (45, 13, 2), (45, 26, 1), (43, 25, 1), (42, 12, 2), (42, 24, 1),
+    (41, 4, 3), (41, 11, 2), (41, 23, 1), (39, 22, 1), (38, 10, 2), (38, 21, 1), (36, 20, 1),
+    (33, 19, 1), (32, 9, 2), (32, 18, 1), (31, 3, 3), (31, 8, 2), (31, 17, 1), (30, 0, 4),
+    (30, 2, 3), (30, 7, 2), (30, 16, 1), (28, 15, 1), (27, 6, 2), (27, 14, 1), (26, 1, 3),
+    (26, 5, 2), (26, 13, 1), (24, 12, 1), (23, 4, 2), (23, 11, 1), (21, 10, 1), (18, 9, 1),
+    (17, 3, 2), (17, 8, 1), (16, 0, 3), (16, 2, 2), (16, 7, 1), (14, 6, 1), (13, 1, 2),
+    (13, 5, 1), (11, 4, 1), (8, 3, 1), (7, 0, 2), (7, 2, 1), (5, 1, 1), (2, 0, 1)
+);
+
+shift_steps!(shift_along_z, SHIFT_Z:
+    (55, 0, 5), (55, 3, 4), (55, 9, 3), (55, 19, 2), (55, 34, 1), (54, 2, 4), (54, 8, 3),
+    (54, 18, 2), (54, 33, 1), (53, 7, 3), (53, 17, 2), (53, 32, 1), (52, 16, 2), (52, 31, 1),
+    (51, 30, 1), (49, 1, 4), (49, 6, 3), (49, 15, 2), (49, 29, 1), (48, 5, 3), (48, 14, 2),
+    (48, 28, 1), (47, 13, 2), (47, 27, 1), (46, 26, 1), (44, 4, 3), (44, 12, 2), (44, 25, 1),
+    (43, 11, 2), (43, 24, 1), (42, 23, 1), (40, 10, 2), (40, 22, 1), (39, 21, 1), (37, 20, 1),
+    (34, 0, 4), (34, 3, 3), (34, 9, 2), (34, 19, 1), (33, 2, 3), (33, 8, 2), (33, 18, 1),
+    (32, 7, 2), (32, 17, 1), (31, 16, 1), (29, 1, 3), (29, 6, 2), (29, 15, 1), (28, 5, 2),
+    (28, 14, 1), (27, 13, 1), (25, 4, 2), (25, 12, 1), (24, 11, 1), (22, 10, 1), (19, 0, 3),
+    (19, 3, 2), (19, 9, 1), (18, 2, 2), (18, 8, 1), (17, 7, 1), (15, 1, 2), (15, 6, 1),
+    (14, 5, 1), (12, 4, 1), (9, 0, 2), (9, 3, 1), (8, 2, 1), (6, 1, 1), (3, 0, 1)
+);
 
 /// Relative rounding allowance of one shift (see the module docs).
 const SHIFT_SLACK: f64 = 128.0 * f64::EPSILON;
@@ -201,27 +308,48 @@ impl Moments {
     }
 
     /// Sets these to the moments of `lights` about `centre`, summed
-    /// directly.
+    /// directly: [`LIGHT_LANES`] lights side by side, each lane summing its
+    /// lights' terms in order, the lanes added pairwise at the end (a sum
+    /// of `n` terms in any order rounds each term at most `n - 1` times;
+    /// the padded lanes add exact zeros).
     #[inline(always)]
     pub(crate) fn set_to_lights(&mut self, lights: &[PointLight], centre: DVec3) {
-        self.clear();
-        for l in lights {
-            let y = l.position.as_dvec3() - centre;
-            let i = l.intensity.as_dvec3();
-            let lanes = [i.x, i.y, i.z, 0.0];
-            let (px, py, pz) = (scaled_powers(y.x), scaled_powers(y.y), scaled_powers(y.z));
-            let values: [f64; MONOMIALS] = monomial_values!(px, py, pz);
-            for (acc, v) in self.m.iter_mut().zip(values) {
-                mul_add(acc, &lanes, v);
+        let mut m = [[[0.0; LIGHT_LANES]; 3]; MONOMIALS];
+        let mut abs = [[[0.0; LIGHT_LANES]; 3]; DEGREE + 1];
+        for chunk in lights.chunks(LIGHT_LANES) {
+            // Padded lanes: at the centre, dark.
+            let mut y = [[0.0; LIGHT_LANES]; 3];
+            let mut i = [[0.0; LIGHT_LANES]; 3];
+            for (k, l) in chunk.iter().enumerate() {
+                let offset = (l.position.as_dvec3() - centre).to_array();
+                let intensity = l.intensity.as_dvec3().to_array();
+                for axis in 0..3 {
+                    y[axis][k] = offset[axis];
+                    i[axis][k] = intensity[axis];
+                }
             }
-            let s = scaled_powers(y.x.abs() + y.y.abs() + y.z.abs());
-            for (acc, p) in self.abs.iter_mut().zip(s) {
-                mul_add(acc, &lanes, p);
+            let px = scaled_power_lanes(&y[0]);
+            let py = scaled_power_lanes(&y[1]);
+            let pz = scaled_power_lanes(&y[2]);
+            let values: [LightLanes; MONOMIALS] = monomial_values!(px, py, pz);
+            for (acc, v) in m.iter_mut().zip(&values) {
+                add_products(acc, v, &i);
+            }
+            let mut norm = [0.0; LIGHT_LANES];
+            for k in 0..LIGHT_LANES {
+                norm[k] = y[0][k].abs() + y[1][k].abs() + y[2][k].abs();
+            }
+            for (acc, p) in abs.iter_mut().zip(&scaled_power_lanes(&norm)) {
+                add_products(acc, p, &i);
             }
         }
+        for (out, m) in self.m.iter_mut().zip(&m) {
+            *out = [lane_sum(&m[0]), lane_sum(&m[1]), lane_sum(&m[2]), 0.0];
+        }
         let slack = (lights.len() as f64 + 64.0) * f64::EPSILON;
-        for (abs, err) in self.abs.iter_mut().zip(self.err.iter_mut()) {
-            for (a, e) in abs.iter_mut().zip(err.iter_mut()) {
+        for ((a, e), sums) in self.abs.iter_mut().zip(self.err.iter_mut()).zip(&abs) {
+            *a = [lane_sum(&sums[0]), lane_sum(&sums[1]), lane_sum(&sums[2]), 0.0];
+            for (a, e) in a.iter_mut().zip(e.iter_mut()) {
                 *a *= 1.0 + slack;
                 *e = *a * slack;
             }
@@ -245,9 +373,10 @@ impl Moments {
                 continue;
             }
             let w = scaled_powers(tv);
-            for &(target, source, power) in &SHIFT_STEPS[axis] {
-                let from = m[usize::from(source)];
-                mul_add(&mut m[usize::from(target)], &from, w[usize::from(power)]);
+            match axis {
+                0 => shift_along_x(m, &w),
+                1 => shift_along_y(m, &w),
+                _ => shift_along_z(m, &w),
             }
         }
         for (acc, v) in sum.m.iter_mut().zip(m.iter()) {
@@ -513,6 +642,13 @@ mod tests {
 
     /// Shifting moments to a new centre agrees with summing about it
     /// directly, within the two error bounds, and the bounds stay small.
+    #[test]
+    fn the_straight_line_shifts_follow_the_table() {
+        assert_eq!(SHIFT_X, SHIFT_STEPS[0]);
+        assert_eq!(SHIFT_Y, SHIFT_STEPS[1]);
+        assert_eq!(SHIFT_Z, SHIFT_STEPS[2]);
+    }
+
     #[test]
     fn shifted_moments_match_direct_sums_within_their_bounds() {
         for seed in 1..40u64 {
