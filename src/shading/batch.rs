@@ -833,7 +833,10 @@ impl<S: Shader> Shading<'_, S> {
     /// A relative target is aimed at with the darkest of four points spread
     /// over the run (virtual-light estimates, with a margin); a point that
     /// still misses its own target gets up to three further shared
-    /// refinements and is then shaded on its own. A run whose shared cut
+    /// refinements and is then shaded on its own. Without interpolation, a
+    /// point that met its target keeps the result of the round it met it
+    /// in; with interpolation every point of the run takes the last round's
+    /// cut. A run whose shared cut
     /// costs more than a share of what its points would cost alone (a
     /// running estimate from the points shaded alone) is split in two, and
     /// runs of fewer than four points are shaded point by point.
@@ -1259,7 +1262,15 @@ impl<S: Shader> Shading<'_, S> {
             let lights =
                 (scratch.lights.len() + scratch.above.len() + scratch.shadowed.len()) as u32;
             let mut darkest = f64::INFINITY;
+            // Without interpolation a point that met its target on an
+            // earlier round keeps that result: the further rounds are for
+            // the points that missed. (Interpolated points all take the last
+            // round's blend, which keeps the group's image smooth.)
+            let keep_met = round > 0 && threshold.interpolation().is_none();
             for (k, &i) in members.iter().enumerate() {
+                if keep_met && !scratch.alone[k] {
+                    continue;
+                }
                 let (radiance, rays) =
                     self.point_sum(&queries[i as usize], scratch, cut.visibility);
                 scratch.results[k] = ShadeResult {
