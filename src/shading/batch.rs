@@ -1043,18 +1043,10 @@ impl<S: Shader> Shading<'_, S> {
             stats.points_alone += members.len() as u32;
             return Ok(());
         }
-        if self.scratch.batch.alone_cost == 0.0 {
-            // No estimate yet of what sharing must beat: the first point
-            // alone.
-            let i = members[0] as usize;
-            write(
-                i,
-                self.shade_alone(&queries[i], threshold, &mut *visibility)?,
-            );
-            stats.points_alone += 1;
-            let rest = &members[1..];
-            return self.shade_members(queries, rest, threshold, visibility, write, stats);
-        }
+        // Without an estimate yet of what sharing must beat, the shared cut
+        // gets the least budget; if that is too little, the first point is
+        // shaded alone for an estimate.
+        let unknown = self.scratch.batch.alone_cost == 0.0;
         match self.shade_shared(queries, members, &threshold, visibility, stats) {
             Ok(()) => {
                 for (k, &i) in members.iter().enumerate() {
@@ -1069,6 +1061,16 @@ impl<S: Shader> Shading<'_, S> {
                     }
                 }
                 Ok(())
+            }
+            Err(TooCostly) if unknown => {
+                let i = members[0] as usize;
+                write(
+                    i,
+                    self.shade_alone(&queries[i], threshold, &mut *visibility)?,
+                );
+                stats.points_alone += 1;
+                let rest = &members[1..];
+                self.shade_members(queries, rest, threshold, visibility, write, stats)
             }
             Err(TooCostly) => {
                 let (a, b) = members.split_at(members.len() / 2);
