@@ -149,10 +149,14 @@ fn add_products(acc: &mut [LightLanes; 3], v: &LightLanes, i: &[LightLanes; 3]) 
     }
 }
 
-/// The lanes' sum, pairwise.
+/// Per channel, its lanes' sum, pairwise (`(l0 + l1) + (l2 + l3)`), and
+/// 0 in the spare lane: written as sums of the transposed lanes, so that
+/// the additions are vertical.
 #[inline(always)]
-fn lane_sum(x: &LightLanes) -> f64 {
-    (x[0] + x[1]) + (x[2] + x[3])
+fn lane_sums(x: &[LightLanes; 3]) -> Lanes {
+    let lane = |l: usize| [x[0][l], x[1][l], x[2][l], 0.0];
+    let add = |a: Lanes, b: Lanes| [a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3]];
+    add(add(lane(0), lane(1)), add(lane(2), lane(3)))
 }
 
 /// Per axis, the steps of a shift along it: `(target, source, power)` with
@@ -344,11 +348,11 @@ impl Moments {
             }
         }
         for (out, m) in self.m.iter_mut().zip(&m) {
-            *out = [lane_sum(&m[0]), lane_sum(&m[1]), lane_sum(&m[2]), 0.0];
+            *out = lane_sums(m);
         }
         let slack = (lights.len() as f64 + 64.0) * f64::EPSILON;
         for ((a, e), sums) in self.abs.iter_mut().zip(self.err.iter_mut()).zip(&abs) {
-            *a = [lane_sum(&sums[0]), lane_sum(&sums[1]), lane_sum(&sums[2]), 0.0];
+            *a = lane_sums(sums);
             for (a, e) in a.iter_mut().zip(e.iter_mut()) {
                 *a *= 1.0 + slack;
                 *e = *a * slack;
@@ -422,10 +426,34 @@ impl Moments {
         let pad = 2.0 * (lights as f64 + HARMONIC_BUILD_PAD) * f64::EPSILON;
         // Per degree 3 to 5, the harmonic moments (unscaled).
         let mut harmonics = [[ZERO; 11]; 3];
+        // Per degree, `1 / (I_k R^l)` and the squared norm of the scaled
+        // harmonic moments, the channels side by side (a channel without
+        // intensity, and the spare lane, are computed and never used).
+        let mut scales = [ZERO; 3];
+        let mut squares = [ZERO; 3];
         if r > 0.0 {
             for (c, terms) in harmonics.iter_mut().zip(&tables.terms) {
                 for &(row, n, w) in terms {
                     mul_add(&mut c[usize::from(row)], &self.m[usize::from(n)], w);
+                }
+            }
+            let mut power = [0.0; 4];
+            for ch in 0..3 {
+                power[ch] = intensity[ch] * r * r;
+            }
+            for ((degree, scale), square) in harmonics.iter().zip(&mut scales).zip(&mut squares) {
+                for ch in 0..4 {
+                    power[ch] *= r;
+                    // 1 / (I_k R^l), with a few roundings that `grow`
+                    // covers; applied before squaring, which could
+                    // underflow.
+                    scale[ch] = 1.0 / power[ch];
+                }
+                *square = [-0.0; 4];
+                for row in degree {
+                    for ch in 0..4 {
+                        square[ch] += (row[ch] * scale[ch]).powi(2);
+                    }
                 }
             }
         }
@@ -465,15 +493,10 @@ impl Moments {
                 relative_error = relative_error
                     .max(first * inv_i / r)
                     .max(second * inv_i / (r * r));
-                let mut power = i * r * r;
-                for (d, (degree, gain)) in harmonics.iter().zip(tables.error_gain).enumerate() {
+                for (d, gain) in tables.error_gain.into_iter().enumerate() {
                     let l = d + 3;
-                    power *= r;
                     let error = gain * (self.err[l][ch] + SHIFT_SLACK * self.abs[l][ch]);
-                    // 1 / (I_k R^l), with a few roundings that `grow` covers;
-                    // applied before squaring, which could underflow.
-                    let scale = 1.0 / power;
-                    let sq: f64 = degree.iter().map(|c| (c[ch] * scale).powi(2)).sum();
+                    let (scale, sq) = (scales[d][ch], squares[d][ch]);
                     let q = (sq.sqrt() * grow + error * scale) * grow * grow + pad;
                     out.harmonic_norms[d][ch] = round_up_f32(q * (1.0 + BUILD_LENGTH_SLACK));
                 }
