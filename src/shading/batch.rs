@@ -838,8 +838,10 @@ impl<S: Shader> Shading<'_, S> {
     /// in; with interpolation every point of the run takes the last round's
     /// cut. A run whose shared cut
     /// costs more than a share of what its points would cost alone (a
-    /// running estimate from the points shaded alone) is split in two, and
-    /// runs of fewer than four points are shaded point by point.
+    /// running estimate from the points shaded alone; before there is one,
+    /// a small fixed budget, and a run over it first shades one point
+    /// alone for the estimate) is split in two, and runs of fewer than four
+    /// points are shaded point by point.
     ///
     /// A point's [`ShadeResult::nodes_evaluated`] then counts the node
     /// estimates it summed (cheaper than bounds) and
