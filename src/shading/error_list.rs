@@ -154,7 +154,9 @@ impl Default for ErrorList {
             entries: Vec::new(),
             keys: Vec::new(),
             next: Vec::new(),
-            heads: vec![NONE; BUCKETS].into_boxed_slice(),
+            // Allocated by the first `clear`, which every cut calls before
+            // it pushes: a list made only to be swapped out costs nothing.
+            heads: Box::default(),
             base: 0,
             top: 0,
             touched: (BUCKETS, 0),
@@ -180,7 +182,11 @@ fn above(a: &Entry, b: &Entry) -> bool {
 }
 
 impl ErrorList {
+    /// Empties the list (the first time, allocates its buckets).
     pub(crate) fn clear(&mut self) {
+        if self.heads.is_empty() {
+            self.heads = vec![NONE; BUCKETS].into_boxed_slice();
+        }
         let (lo, hi) = self.touched;
         if lo <= hi {
             self.heads[lo..=hi].fill(NONE);
