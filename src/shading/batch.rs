@@ -864,10 +864,10 @@ impl<S: Shader> Shading<'_, S> {
     /// [`shade_query`](Self::shade_query) for each.
     ///
     /// Speed: on a 10^6-light street city seen from above the streets, one
-    /// core, certified 1% per pixel, the batch call took about 4 us per
-    /// pixel, 441 times less than a vectorized exact sum and 8 to 10 times
+    /// core, certified 1% per pixel, the batch call took about 2 us per
+    /// pixel, about 820 times less than a vectorized exact sum and 6 times
     /// less than shading each pixel on its own (`cargo run --release -p
-    /// manylights-report -- batch`, two runs).
+    /// manylights-report -- batch`, one run).
     ///
     /// Allocation: a call allocates its Morton order and group list (linear
     /// in the batch); the session's scratch space is reused across calls.
