@@ -5,7 +5,7 @@ use glam::{DVec3, Vec3};
 mod series;
 
 use series::{Rgb, WidthInput, degree_two_lanes, rgb, series_width};
-pub(crate) use series::{SharedView, shared_width};
+pub(crate) use series::{SharedView, shared_width, shared_widths};
 
 use crate::geometry::{Cone, Surface};
 use crate::lanes::{Lanes, Vec3Lanes, array};

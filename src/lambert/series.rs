@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 
-use crate::lanes::{Lanes, Vec3Lanes};
+use crate::lanes::{Lanes, Vec3Lanes, array};
 use crate::numeric::{POINT_SLACK, SERIES_SLACK};
 use crate::tree::Node;
 
@@ -142,7 +142,7 @@ pub(super) fn degree_two_lanes<const N: usize>(
 /// What a group of shading points knows of a node's geometry for
 /// [`shared_width`], as upper bounds over every point `p` of the group and
 /// its exact unit normal `n`.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct SharedView {
     /// `1 / D` for the smallest distance `D > R` from a point to the
     /// node's centroid.
@@ -176,23 +176,37 @@ pub(crate) struct SharedView {
 /// `hperp <= height + (tilt + |c0|) R`; and `I_k / D_p^2 <= I_k / D^2`.
 #[inline(always)]
 pub(crate) fn shared_width(node: &Node, view: &SharedView) -> DVec3 {
-    let inv_d = view.inv_nearest;
-    let radius = f64::from(node.radius);
-    let sigma = radius * inv_d;
-    let ac = view.cosine.min(1.0) + SERIES_SLACK;
-    let hperp = (view.height + (view.tilt + ac + SERIES_SLACK) * radius) * inv_d;
-    let [x, y, z] = series_width::<1>(
-        &[node],
-        &WidthInput {
-            inv_d: Lanes::splat(inv_d),
-            sigma: Lanes::splat(sigma),
-            inv_rho: Lanes::splat(1.0 / (1.0 - sigma)),
-            ac: Lanes::splat(ac),
-            nu2: Lanes::splat(1.0),
-            hperp: Lanes::splat(hperp),
-        },
-    );
-    DVec3::new(x.0[0], y.0[0], z.0[0])
+    shared_widths::<1>(&[node], &[*view])[0]
+}
+
+/// [`shared_width`] for `N` nodes side by side, each lane through exactly
+/// the operations of one node alone (the same bits).
+#[inline(always)]
+pub(crate) fn shared_widths<const N: usize>(
+    nodes: &[&Node; N],
+    views: &[SharedView; N],
+) -> [DVec3; N] {
+    let mut input = WidthInput {
+        inv_d: Lanes::splat(0.0),
+        sigma: Lanes::splat(0.0),
+        inv_rho: Lanes::splat(0.0),
+        ac: Lanes::splat(0.0),
+        nu2: Lanes::splat(1.0),
+        hperp: Lanes::splat(0.0),
+    };
+    for (i, (node, view)) in nodes.iter().zip(views).enumerate() {
+        let inv_d = view.inv_nearest;
+        let radius = f64::from(node.radius);
+        let sigma = radius * inv_d;
+        let ac = view.cosine.min(1.0) + SERIES_SLACK;
+        input.inv_d.0[i] = inv_d;
+        input.sigma.0[i] = sigma;
+        input.inv_rho.0[i] = 1.0 / (1.0 - sigma);
+        input.ac.0[i] = ac;
+        input.hperp.0[i] = (view.height + (view.tilt + ac + SERIES_SLACK) * radius) * inv_d;
+    }
+    let [x, y, z] = series_width::<N>(nodes, &input);
+    array(DVec3::ZERO, |i| DVec3::new(x.0[i], y.0[i], z.0[i]))
 }
 
 #[cfg(test)]

@@ -13,7 +13,8 @@ use super::refine::{region, reported_bound};
 use super::{Accepts, Query, ShadeResult, Shading, Stop, Threshold};
 use crate::ShadeError;
 use crate::geometry::{Aabb, Cone, Surface};
-use crate::lambert::{SharedView, shared_width};
+use crate::lambert::{SharedView, shared_width, shared_widths};
+use crate::lanes::array;
 use crate::numeric::{
     CompensatedSum, DISTANCE_SLACK, POINT_SLACK, SECOND_ORDER_SLACK, SERIES_SLACK,
 };
@@ -368,6 +369,31 @@ struct Entering {
 /// The cut grew past its allowance: the group is split.
 struct TooCostly;
 
+/// Most children of a node (an octree).
+const MAX_CHILDREN: usize = 8;
+
+/// What the group sees of a node to be bounded, before its width.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    view: SharedView,
+    /// How far members reach below some point's tangent plane (0 if none).
+    depth: f64,
+    /// The nearest distance less the node's radius.
+    gap: f64,
+}
+
+/// A child of a node being refined, between the passes of
+/// [`SharedCut::refine`].
+#[derive(Clone, Copy, Debug)]
+enum Child {
+    /// Dark, a single light (already in the cut) or below every plane.
+    Skip,
+    /// Too near the group for a shared bound.
+    Near,
+    /// Bounded: its view and (once taken) its width.
+    Bound(Pending, DVec3),
+}
+
 impl<V: Visibility> SharedCut<'_, V> {
     /// Asks the host about `region` for the whole group, unless `visible`
     /// is known already; `None` when it is occluded, else whether it is
@@ -543,18 +569,93 @@ impl<V: Visibility> SharedCut<'_, V> {
         weight: f64,
         mut child: impl FnMut(&mut Self, &mut BatchScratch, usize, Entering),
     ) {
-        let node = &self.tree.nodes[index as usize];
+        let tree = self.tree;
+        let node = &tree.nodes[index as usize];
         if node.is_leaf() {
             for k in node.lights() {
-                let l = self.tree.lights[k];
+                let l = tree.lights[k];
                 let light = (l.position.as_dvec3(), l.intensity.as_dvec3());
                 self.light(scratch, light, visible, index as usize, weight);
             }
-        } else {
-            for c in node.children() {
+            return;
+        }
+        // The children's widths are taken side by side: first each child's
+        // geometry (single lights go into the cut here), then the widths in
+        // lanes, then, in the children's order, the host and `child`.
+        let children = node.children();
+        if children.len() > MAX_CHILDREN {
+            for c in children {
                 if let Some(e) = self.entering(scratch, c, visible, weight) {
                     child(self, scratch, c, e);
                 }
+            }
+            return;
+        }
+        let first = children.start;
+        let mut states = [Child::Skip; MAX_CHILDREN];
+        let mut bounded = [(0usize, 0usize, SharedView::default()); MAX_CHILDREN];
+        let mut count = 0;
+        for (k, c) in children.clone().enumerate() {
+            let node = &tree.nodes[c];
+            if node.intensity == DVec3::ZERO {
+                continue;
+            }
+            if node.radius == 0.0 {
+                let light = (node.centroid.as_dvec3(), node.intensity);
+                self.light(scratch, light, visible, c, weight);
+                continue;
+            }
+            self.evaluations += 1;
+            states[k] = match self.shared_view(node) {
+                Ok(None) => Child::Skip,
+                Err(()) => Child::Near,
+                Ok(Some(pending)) => {
+                    bounded[count] = (k, c, pending.view);
+                    count += 1;
+                    Child::Bound(pending, DVec3::ZERO)
+                }
+            };
+        }
+        match count {
+            0 => {}
+            1 => self.widths::<1>(&mut states, &bounded[..1]),
+            2..=4 => self.widths::<4>(&mut states, &bounded[..count]),
+            _ => self.widths::<8>(&mut states, &bounded[..count]),
+        }
+        for (k, state) in states.iter().enumerate().take(children.len()) {
+            let c = first + k;
+            let node = &tree.nodes[c];
+            let error = match state {
+                Child::Skip => continue,
+                Child::Near => None,
+                Child::Bound(pending, width) => Some(self.shared_error(node, pending, *width)),
+            };
+            let Some(visible) = self.ask(visible, &region(node, c)) else {
+                continue;
+            };
+            let error = error.filter(|_| visible);
+            child(self, scratch, c, Entering { visible, error });
+        }
+    }
+
+    /// The widths of the children `bounded` (`(k, index, view)`: the
+    /// `k`-th child, node `index`, what the group sees of it) into their
+    /// states, `N` lanes at a time; unused lanes repeat the last child.
+    #[inline(always)]
+    fn widths<const N: usize>(
+        &self,
+        states: &mut [Child; MAX_CHILDREN],
+        bounded: &[(usize, usize, SharedView)],
+    ) {
+        let last = bounded.len() - 1;
+        let pick = |i: usize| &bounded[i.min(last)];
+        let tree = self.tree;
+        let nodes: [&Node; N] = array(&tree.nodes[bounded[0].1], |i| &tree.nodes[pick(i).1]);
+        let views = array(bounded[0].2, |i| pick(i).2);
+        let widths = shared_widths::<N>(&nodes, &views);
+        for (&(k, _, _), width) in bounded.iter().zip(widths) {
+            if let Child::Bound(_, w) = &mut states[k] {
+                *w = width;
             }
         }
     }
@@ -565,6 +666,16 @@ impl<V: Visibility> SharedCut<'_, V> {
     /// for one whose ball comes too near the group.
     #[inline(always)]
     fn shared_bound(&self, node: &Node) -> Result<Option<DVec3>, ()> {
+        Ok(self.shared_view(node)?.map(|pending| {
+            let width = shared_width(node, &pending.view);
+            self.shared_error(node, &pending, width)
+        }))
+    }
+
+    /// [`shared_bound`](Self::shared_bound) up to the width: what the group
+    /// sees of the node.
+    #[inline(always)]
+    fn shared_view(&self, node: &Node) -> Result<Option<Pending>, ()> {
         let group = &self.group;
         let distance = (node.centroid.as_dvec3() - group.centre).length();
         let radius = f64::from(node.radius);
@@ -581,18 +692,29 @@ impl<V: Visibility> SharedCut<'_, V> {
             return Err(());
         }
         let inv_nearest = 1.0 / nearest;
-        let view = group.view(node, inv_nearest, distance);
+        Ok(Some(Pending {
+            view: group.view(node, inv_nearest, distance),
+            depth,
+            gap: nearest - radius,
+        }))
+    }
+
+    /// [`shared_bound`](Self::shared_bound) from the node's view and series
+    /// width.
+    #[inline(always)]
+    fn shared_error(&self, node: &Node, pending: &Pending, width: DVec3) -> DVec3 {
+        let inv_nearest = pending.view.inv_nearest;
         let intensity = node.intensity * self.kd;
-        let mut error = intensity * (inv_nearest * inv_nearest) * shared_width(node, &view);
-        if depth > 0.0 {
+        let mut error = intensity * (inv_nearest * inv_nearest) * width;
+        if pending.depth > 0.0 {
             // Members below some point's tangent plane: the clamp makes the
             // exact sum exceed the smooth one by at most `I kd depth /
             // (D - R)^3` at that point (see `Lambert`'s docs), `depth` how
             // far they reach below its plane, at most `-lowest` here.
-            let gap = nearest - radius;
-            error += intensity * (depth / (gap * gap * gap)) * (1.0 + 16.0 * f64::EPSILON);
+            let gap = pending.gap;
+            error += intensity * (pending.depth / (gap * gap * gap)) * (1.0 + 16.0 * f64::EPSILON);
         }
-        Ok(Some(error))
+        error
     }
 
     /// Blends every waiting node whose error lies within `band` of `level`
