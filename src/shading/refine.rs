@@ -196,9 +196,10 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             let Some(top) = list.peek().copied() else {
                 break;
             };
-            let node = self.tree.nodes[top.node as usize];
+            let tree = self.tree;
+            let node = &tree.nodes[top.node as usize];
             let refining = top.seen != Seen::Unknown || self.gave_up_classifying();
-            if refining && !self.can_refine(&node, top.seen == Seen::Visible) {
+            if refining && !self.can_refine(node, top.seen == Seen::Visible) {
                 outcome.stop = Stop::Budget;
                 break;
             }
@@ -223,7 +224,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     // Children's priorities are capped at the parent's.
                     let frame = n.refined(&top, parent);
                     let outer = std::mem::take(&mut self.settled);
-                    self.refine(&node, visible, 1.0, &mut |mut e: Entry| {
+                    self.refine(node, visible, 1.0, &mut |mut e: Entry| {
                         e.key = e.key.min(top.key);
                         list.push(e);
                         n.pushed(&e, frame);
@@ -233,11 +234,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     n.settled(frame, settled);
                     n.finish(frame);
                 } else {
-                    self.refine(&node, visible, 1.0, &mut *list);
+                    self.refine(node, visible, 1.0, &mut *list);
                 }
             } else if let (Some(n), Some(parent)) = (nesting.as_deref_mut(), parent) {
                 let outer = std::mem::take(&mut self.settled);
-                let entry = self.classify(&node, top);
+                let entry = self.classify(node, top);
                 let settled = std::mem::replace(&mut self.settled, outer).value();
                 self.settled.add(settled);
                 n.settled(parent, settled);
@@ -247,7 +248,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     n.pushed(&e, parent);
                 }
                 n.finish(parent);
-            } else if let Some(e) = self.classify(&node, top) {
+            } else if let Some(e) = self.classify(node, top) {
                 list.push(e);
             }
         }
