@@ -110,8 +110,9 @@ pub enum ValidationError {
         /// Index of the light in leaf order.
         light: usize,
     },
-    /// The node's light range is not the union of its children's.
-    #[error("node {node}: children do not partition its light range")]
+    /// The node's light range is not the union of its children's, or it has
+    /// more than 8 children (an octree node has at most 8).
+    #[error("node {node}: children do not partition its light range, or more than 8")]
     BadChildRange {
         /// Offending node.
         node: usize,

@@ -19,7 +19,7 @@ use crate::numeric::{
     CompensatedSum, DISTANCE_SLACK, POINT_SLACK, SECOND_ORDER_SLACK, SERIES_SLACK,
 };
 use crate::shader::Shader;
-use crate::tree::{LightTree, Node, morton};
+use crate::tree::{LightTree, MAX_CHILDREN, Node, morton};
 use crate::visibility::{Coverage, NodeRegion, PointGroup, Visibility};
 
 /// What a batch call did.
@@ -369,9 +369,6 @@ struct Entering {
 /// The cut grew past its allowance: the group is split.
 struct TooCostly;
 
-/// Most children of a node (an octree).
-const MAX_CHILDREN: usize = 8;
-
 /// What the group sees of a node to be bounded, before its width.
 #[derive(Clone, Copy, Debug)]
 struct Pending {
@@ -582,15 +579,8 @@ impl<V: Visibility> SharedCut<'_, V> {
         // The children's widths are taken side by side: first each child's
         // geometry (single lights go into the cut here), then the widths in
         // lanes, then, in the children's order, the host and `child`.
+        // At most `MAX_CHILDREN` (the builder's octree; `validate` checks it).
         let children = node.children();
-        if children.len() > MAX_CHILDREN {
-            for c in children {
-                if let Some(e) = self.entering(scratch, c, visible, weight) {
-                    child(self, scratch, c, e);
-                }
-            }
-            return;
-        }
         let first = children.start;
         let mut states = [Child::Skip; MAX_CHILDREN];
         let mut bounded = [(0usize, 0usize, SharedView::default()); MAX_CHILDREN];

@@ -10,5 +10,5 @@ mod refit;
 mod validate;
 
 pub use build::TreeBuilder;
-pub(crate) use layout::NO_PLANE;
+pub(crate) use layout::{MAX_CHILDREN, NO_PLANE};
 pub use layout::{LightTree, Node};

@@ -3,15 +3,16 @@
 use glam::DVec3;
 
 use super::build::{HARMONIC_COUNT, harmonic_norms, solid_harmonics};
-use super::layout::LightTree;
+use super::layout::{LightTree, MAX_CHILDREN};
 use crate::ValidationError;
 use crate::numeric::SUM_TOLERANCE;
 
 impl LightTree {
     /// Checks the tree's invariants and returns the first one broken.
     ///
-    /// * Every node's light range is the concatenation of its children's, and
-    ///   the root's is every light: each light lies in exactly one leaf.
+    /// * Every node's light range is the concatenation of its children's, of
+    ///   which it has at most 8, and the root's is every light: each light
+    ///   lies in exactly one leaf.
     /// * The index map back to the caller's order is a permutation.
     /// * Every node's intensity is the sum of its children's (leaves: of
     ///   their lights), to `f64` rounding.
@@ -77,7 +78,10 @@ impl LightTree {
                     .sum::<DVec3>()
             } else {
                 let children = node.children();
-                if children.start <= i || children.end > self.nodes.len() {
+                if children.start <= i
+                    || children.end > self.nodes.len()
+                    || children.len() > MAX_CHILDREN
+                {
                     return Err(ValidationError::BadChildRange { node: i });
                 }
                 let mut next = range.start;
