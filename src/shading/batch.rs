@@ -977,9 +977,9 @@ impl<S: Shader> Shading<'_, S> {
     ///
     /// Speed: on a 10^6-light street city seen from above the streets, one
     /// core, certified 1% per pixel, the batch call took about 2 us per
-    /// pixel, about 820 times less than a vectorized exact sum and 6 times
-    /// less than shading each pixel on its own (`cargo run --release -p
-    /// manylights-report -- batch`, one run).
+    /// pixel, 820 to 860 times less than a vectorized exact sum and 6 to 6.5
+    /// times less than shading each pixel on its own (`cargo run --release
+    /// -p manylights-report -- batch`, two runs).
     ///
     /// Allocation: a call allocates its Morton order and group list (linear
     /// in the batch); the session's scratch space is reused across calls.
