@@ -10,5 +10,5 @@ mod refit;
 mod validate;
 
 pub use build::TreeBuilder;
-pub(crate) use layout::{MAX_CHILDREN, NO_PLANE};
 pub use layout::{LightTree, Node};
+pub(crate) use layout::{MAX_CHILDREN, NO_PLANE};
