@@ -39,6 +39,47 @@ fn patch() -> impl Strategy<Value = Vec<(Vec3, Vec3)>> {
         })
 }
 
+/// A coherent patch large enough to make several groups, so that groups
+/// blend their neighbours' halos.
+fn large_patch() -> impl Strategy<Value = Vec<(Vec3, Vec3)>> {
+    (
+        vec_in(12.0),
+        direction(),
+        0.01f32..=6.0,
+        0.0f32..=0.6,
+        129usize..=600,
+        any::<u64>(),
+    )
+        .prop_map(|(centre, normal, radius, tilt, count, seed)| {
+            let n = normal.normalize();
+            let (u, v) = n.any_orthonormal_pair();
+            let mut state = seed;
+            let mut unit = move || {
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                ((state >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+            };
+            (0..count)
+                .map(|_| {
+                    let (a, b, h) = (unit(), unit(), 0.05 * unit());
+                    let wobble = Vec3::new(unit(), unit(), unit());
+                    (centre + (u * a + v * b + n * h) * radius, n + wobble * tilt)
+                })
+                .collect()
+        })
+}
+
+/// An interpolated threshold, relative or absolute.
+fn interpolated() -> impl Strategy<Value = Threshold> {
+    prop_oneof![
+        (1e-4f64..=0.5, 1.1f64..=8.0)
+            .prop_map(|(t, band)| Threshold::relative(t).with_interpolation(band)),
+        (-6.0f64..=3.0, 1.1f64..=8.0)
+            .prop_map(|(u, band)| Threshold::absolute(10f64.powf(u)).with_interpolation(band)),
+    ]
+}
+
 /// Points anywhere in the cube of half-size 12, normals anywhere.
 fn scattered() -> impl Strategy<Value = Vec<(Vec3, Vec3)>> {
     prop::collection::vec((vec_in(12.0), direction()), 1..=80)
@@ -106,6 +147,15 @@ proptest! {
         t in threshold(),
     ) {
         check_batch(&light_set, Lambert::new(Vec3::new(0.7, 0.5, 0.3)), &points, t)?;
+    }
+
+    #[test]
+    fn blended_groups_keep_the_contract(
+        light_set in lights(2000),
+        points in large_patch(),
+        t in interpolated(),
+    ) {
+        check_batch(&light_set, Lambert::new(Vec3::new(0.6, 0.8, 0.4)), &points, t)?;
     }
 
     #[test]
@@ -336,6 +386,7 @@ fn the_parallel_batch_gives_the_same_bits() {
         Threshold::relative(0.01),
         Threshold::absolute(1e-3),
         Threshold::relative(0.05).with_budget(200),
+        Threshold::relative(0.01).with_interpolation(2.0),
     ] {
         let mut serial = vec![placeholder(); queries.len()];
         let mut parallel = vec![placeholder(); queries.len()];
@@ -405,4 +456,57 @@ fn interpolation_is_shared_too() {
     }
     // The blend changed the estimates (it refines the last nodes partly).
     assert!(moved > queries.len() / 2, "{moved}");
+}
+
+/// The relative error of each result against the exact sum of its query
+/// (largest channel).
+fn relative_errors(
+    shading: &mut manylights::Shading<'_, Lambert>,
+    queries: &[Query],
+    results: &[ShadeResult],
+) -> Vec<f64> {
+    queries
+        .iter()
+        .zip(results)
+        .map(|(q, r)| {
+            let exact = shading.exact_query(q, Unoccluded);
+            ((r.radiance - exact) / exact).max_element()
+        })
+        .collect()
+}
+
+#[test]
+fn blended_groups_leave_no_seams_at_their_borders() {
+    let (tree, _) = street_patch();
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(0.8)));
+    // A line of points along the street, crossing the borders of several
+    // groups of at most 128 points.
+    let queries: Vec<Query> = (0..1024)
+        .map(|k| Query::new(Vec3::new(1000.0 + k as f32 * 0.05, 1.0, 0.0), Vec3::Z).unwrap())
+        .collect();
+    let jumps = |shading: &mut manylights::Shading<'_, Lambert>, t: Threshold| {
+        let mut results = vec![placeholder(); queries.len()];
+        let stats = shading
+            .shade_batch(&queries, t, Unoccluded, &mut results)
+            .unwrap();
+        assert!(stats.groups >= 8, "{stats:?}");
+        let errors = relative_errors(shading, &queries, &results);
+        errors
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .fold(0.0f64, f64::max)
+    };
+    let plain = jumps(&mut shading, Threshold::relative(0.01));
+    let blended = jumps(
+        &mut shading,
+        Threshold::relative(0.01).with_interpolation(2.0),
+    );
+    // Without interpolation two groups' cuts differ as wholes and the error
+    // jumps at their border; with it each group's cut also serves its
+    // neighbours' points near the border, blended in by distance.
+    assert!(plain > 5e-5, "{plain}");
+    assert!(
+        blended < plain / 4.0 && blended < 5e-5,
+        "{blended} against {plain}"
+    );
 }

@@ -10,7 +10,7 @@ use super::blend;
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::packed::Packed;
 use super::refine::{region, reported_bound};
-use super::{Accepts, Query, ShadeResult, Shading, Stop, Threshold};
+use super::{Accepts, Query, ShadeResult, Shading, Stop, Target, Threshold};
 use crate::ShadeError;
 use crate::geometry::{Aabb, Cone, Surface};
 use crate::lambert::{SharedView, shared_width, shared_widths};
@@ -54,6 +54,16 @@ impl core::ops::AddAssign for BatchStats {
 
 /// Most points in a group.
 const GROUP_POINTS: usize = 128;
+/// With interpolation, a group's cut also serves the points of other groups
+/// within this share of the largest side of its points' box (its halo), and
+/// each point blends the results of its own group and of the groups whose
+/// halo holds it (see [`blend_halos`]). A group of 128 pixels is about 11
+/// pixels across, so a quarter blends over about 3 pixels on each side of
+/// a border. On a scanline of 128-point groups, a sixteenth left jumps of
+/// 2.2e-5, an eighth 1.2e-5, a quarter 7.0e-6; on the report's camera view
+/// an interpolated call took 2.4, 2.9 and 3.6 us per pixel (2.0 with no
+/// halo).
+const HALO_SHARE: f64 = 0.25;
 /// Fewest points worth a shared cut: smaller groups are shaded point by
 /// point.
 const GROUP_MIN_POINTS: usize = 4;
@@ -92,6 +102,41 @@ const FIRST_MARGIN: f64 = 0.9;
 /// Rounds of further refinement for the points of a group that missed
 /// their target, before they are shaded on their own.
 const ROUNDS: usize = 3;
+
+/// The points of a group: indices into the queries, the points of other
+/// groups in its halo with their blend weights, and the group's place in
+/// the batch's list of groups.
+#[derive(Clone, Copy, Debug)]
+struct Members<'a> {
+    points: &'a [u32],
+    halo: &'a [(u32, f64)],
+    run: u32,
+}
+
+/// A group's halo: points of other groups (indices into the queries) with
+/// their blend weights.
+type Halo = Vec<(u32, f64)>;
+
+/// A chunk's results, in Morton order from its first place, for the worker
+/// that takes it.
+#[cfg(feature = "rayon")]
+type Slot<'a> = std::sync::Mutex<Option<(usize, &'a mut [ShadeResult])>>;
+
+/// A group's result for a point of its halo, with its blend weight.
+#[derive(Clone, Copy, Debug)]
+struct HaloResult {
+    point: u32,
+    run: u32,
+    weight: f64,
+    result: ShadeResult,
+}
+
+/// What shading groups gives besides each point's own result.
+#[derive(Debug, Default)]
+struct Outcome {
+    stats: BatchStats,
+    halo: Vec<HaloResult>,
+}
 
 /// Where a group of points lies: a ball of points and a cone of normals,
 /// all widened for rounding.
@@ -315,6 +360,8 @@ pub(crate) struct BatchScratch {
     /// its target (to be shaded on its own).
     results: Vec<ShadeResult>,
     alone: Vec<bool>,
+    /// The halo points' results over the group's cut, in the current round.
+    halo_results: Vec<ShadeResult>,
     /// Nodes a blend still has to refine: index, weight, known visible.
     blending: Vec<(u32, f64, bool)>,
     /// Running estimate of what a point shaded alone costs (0: none yet).
@@ -960,6 +1007,113 @@ fn morton_cells(codes: &[u64], range: Range<usize>, cells: &mut Vec<Range<usize>
     morton_cells(codes, mid..range.end, cells);
 }
 
+/// Each group's halo when `threshold` interpolates (none otherwise, and
+/// none for Lightcuts' per-node target): the points of other groups whose
+/// distance to the group's points' box is less than the halo width,
+/// [`HALO_SHARE`] of the box's largest side, and whose normals lie within
+/// [`GROUP_NORMAL_SPREAD`] of the group's first; each with the weight
+/// `1 - distance / width`, which is 1 on the box and falls to 0 at the
+/// halo's edge.
+fn halos<M>(
+    queries: &[Query<M>],
+    order: &[u32],
+    runs: &[Range<usize>],
+    threshold: &Threshold,
+) -> Vec<Halo> {
+    if threshold.interpolation().is_none() || matches!(threshold.target(), Target::PerNode(_)) {
+        return Vec::new();
+    }
+    let surface = |k: usize| queries[order[k] as usize].surface();
+    let boxes: Vec<(DVec3, DVec3, f64)> = runs
+        .iter()
+        .map(|run| {
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for k in run.clone() {
+                let p = surface(k).point;
+                (lo, hi) = (lo.min(p), hi.max(p));
+            }
+            (lo, hi, HALO_SHARE * (hi - lo).max_element())
+        })
+        .collect();
+    let mut halos = vec![Vec::new(); runs.len()];
+    // The points of group `s` in the halo of group `r`.
+    let mut add = |r: usize, s: usize| {
+        let (lo, hi, width) = boxes[r];
+        let first = surface(runs[r].start).normal;
+        for k in runs[s].clone() {
+            let at = surface(k);
+            let distance = (lo - at.point).max(at.point - hi).max(DVec3::ZERO).length();
+            if distance < width && (at.normal - first).length() <= GROUP_NORMAL_SPREAD {
+                halos[r].push((order[k], 1.0 - distance / width));
+            }
+        }
+    };
+    // The pairs of groups whose boxes, grown by their halo widths, meet: a
+    // sweep along x over the grown boxes.
+    let mut by_x: Vec<usize> = (0..runs.len()).collect();
+    by_x.sort_by(|&a, &b| (boxes[a].0.x - boxes[a].2).total_cmp(&(boxes[b].0.x - boxes[b].2)));
+    let mut active: Vec<usize> = Vec::new();
+    for &r in &by_x {
+        let (lo, hi, width) = boxes[r];
+        active.retain(|&s| boxes[s].1.x + boxes[s].2 >= lo.x - width);
+        for &s in &active {
+            let (lo_s, hi_s, width_s) = boxes[s];
+            let meet = (lo - width).cmple(hi_s + width_s).all()
+                && (lo_s - width_s).cmple(hi + width).all();
+            if meet {
+                add(r, s);
+                add(s, r);
+            }
+        }
+        active.push(r);
+    }
+    halos
+}
+
+/// Blends each point's own result with the results of the groups whose
+/// halo holds it, weighted by the halo weights (its own with weight 1).
+///
+/// Each result is within its certified bound of the exact value, so a
+/// weighted mean with non-negative weights is within the weighted mean of
+/// the bounds; the mean of `m` non-negative terms rounds within
+/// `(2m + 2)` ulps, and `2m + 4` are added to the bound, relative to the
+/// blended value. A point keeps its own result when that missed its
+/// target, or when the blend would.
+///
+/// Inside a group every weight but its own falls continuously to 0 at the
+/// halo's edge, so the blend changes continuously from one group to the
+/// next: the seams that two groups' different cuts leave at their border
+/// are spread over the halo.
+fn blend_halos(results: &mut [ShadeResult], mut halo: Vec<HaloResult>, threshold: &Threshold) {
+    halo.sort_unstable_by_key(|h| (h.point, h.run));
+    for same in halo.chunk_by(|a, b| a.point == b.point) {
+        let own = &mut results[same[0].point as usize];
+        if own.stop != Stop::ThresholdMet {
+            continue;
+        }
+        let (mut weight, mut radiance, mut bound) = (1.0, own.radiance, own.error_bound);
+        let mut blended = *own;
+        for h in same {
+            weight += h.weight;
+            radiance += h.result.radiance * h.weight;
+            bound += h.result.error_bound * h.weight;
+            blended.nodes_evaluated = blended
+                .nodes_evaluated
+                .saturating_add(h.result.nodes_evaluated);
+            blended.lights_evaluated = blended
+                .lights_evaluated
+                .saturating_add(h.result.lights_evaluated);
+            blended.point_queries = blended.point_queries.saturating_add(h.result.point_queries);
+        }
+        let rounding = (2 * same.len() + 6) as f64 * f64::EPSILON;
+        blended.radiance = radiance / weight;
+        blended.error_bound = bound / weight * (1.0 + rounding) + blended.radiance * rounding;
+        if threshold.met(blended.radiance, blended.error_bound, 0.0) {
+            *own = blended;
+        }
+    }
+}
+
 impl<S: Shader> Shading<'_, S> {
     /// Shades a batch of queries into `results` (one per query, same order),
     /// each with the certified contract of
@@ -999,11 +1153,34 @@ impl<S: Shader> Shading<'_, S> {
     /// alone for the estimate) is split in two, and runs of fewer than four
     /// points are shaded point by point.
     ///
+    /// # Group borders with interpolation
+    /// Two groups' cuts differ as wholes, so without more the error would
+    /// jump where one group ends and the next begins. With interpolation
+    /// (relative or absolute targets) each group's cut also serves the
+    /// points of other groups within a quarter of the largest side of its
+    /// points' box (its halo; only points whose normals are within the
+    /// group's normal spread): the group's geometry, and so its certified
+    /// bound, takes them in, and each is summed over the cut. A point's
+    /// result is then the mean of its own group's result (weight 1) and of
+    /// the results of the groups whose halo holds it, each weighted by
+    /// `1 - d / w` (`d` its distance to that group's box, `w` the halo's
+    /// width). The weights fall to 0 continuously at each halo's edge, so
+    /// the result changes continuously across a border. The bound is the
+    /// weighted mean of the bounds plus the rounding of the means; a point
+    /// keeps its own result when the blend would miss its target, and the
+    /// halves of a split group keep theirs. Along a scanline of 2,048 ground
+    /// points in the report's city at 10^6 lights, the largest jump of the
+    /// relative error between neighbours fell from 1.95e-4 to 7.0e-6 (below
+    /// point-by-point interpolation's 2.6e-5). The halo costs: on the
+    /// report's camera view, certified 1%, one call with interpolation took
+    /// 3.6 us per pixel, 2.0 us with no halo and 1.5 us without
+    /// interpolation.
+    ///
     /// A point's [`ShadeResult::nodes_evaluated`] then counts the node
     /// estimates it summed (cheaper than bounds) and
     /// [`lights_evaluated`](ShadeResult::lights_evaluated) the single
-    /// lights; the shared bounds are counted once, in the returned
-    /// [`BatchStats`].
+    /// lights, over every cut it blends; the shared bounds are counted once,
+    /// in the returned [`BatchStats`].
     ///
     /// With occluders, a host that classifies nodes for whole groups
     /// ([`Visibility::classify_group`]) is asked once per group about each
@@ -1057,11 +1234,16 @@ impl<S: Shader> Shading<'_, S> {
             return Ok(stats);
         }
         let (order, codes) = morton_order(queries);
-        for chunk in group_runs(queries, &order, &codes).chunks(CHUNK_RUNS) {
+        let runs = group_runs(queries, &order, &codes);
+        let halos = halos(queries, &order, &runs, &threshold);
+        let mut out = Outcome::default();
+        for (k, chunk) in runs.chunks(CHUNK_RUNS).enumerate() {
             let (points, write) = ((queries, order.as_slice()), &mut |i, r| results[i] = r);
-            self.shade_chunk(points, chunk, threshold, &mut visibility, write, &mut stats)?;
+            let groups = (k * CHUNK_RUNS, chunk, halos.as_slice());
+            self.shade_chunk(points, groups, threshold, &mut visibility, write, &mut out)?;
         }
-        Ok(stats)
+        blend_halos(results, out.halo, &threshold);
+        Ok(out.stats)
     }
 
     /// [`shade_batch`](Self::shade_batch) spread over rayon's thread pool:
@@ -1136,33 +1318,57 @@ impl<S: Shader> Shading<'_, S> {
             slices.push((first.start, slice));
             rest = tail;
         }
-        // The chunks of `shade_batch`, each shaded by a session of the
-        // thread's own, reused from chunk to chunk (a chunk's results do not
-        // depend on what the session shaded before).
-        let stats = chunks
+        let halos = halos(queries, &order, &runs, &threshold);
+        // The chunks of `shade_batch`, handed out in order to one worker per
+        // thread as each finishes its last (a few groups near the camera
+        // cost far more than the rest, and a worker that took a fixed share
+        // of the chunks would keep the other waiting); each worker shades
+        // with a session of its own, reused from chunk to chunk (a chunk's
+        // results do not depend on what the session shaded before).
+        let next = core::sync::atomic::AtomicUsize::new(0);
+        let slots: Vec<Slot<'_>> = slices
+            .into_iter()
+            .map(|slot| std::sync::Mutex::new(Some(slot)))
+            .collect();
+        let workers = rayon::current_num_threads().clamp(1, chunks.len().max(1));
+        let out = (0..workers)
             .into_par_iter()
-            .zip(slices)
-            .map_init(session, |shading, (runs, (start, out))| {
-                let mut stats = BatchStats::default();
-                shading.shade_chunk(
-                    (queries, order.as_slice()),
-                    runs,
-                    threshold,
-                    &mut visibility.clone(),
-                    &mut |i, r| out[place[i] as usize - start] = r,
-                    &mut stats,
-                )?;
-                Ok(stats)
+            .map(|_| {
+                let mut shading = session();
+                let mut out = Outcome::default();
+                loop {
+                    let k = next.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+                    let Some(slot) = slots.get(k) else {
+                        break;
+                    };
+                    // Each index is taken once, so its slot is full and its
+                    // lock free.
+                    let taken = slot.lock().map(|mut slot| slot.take()).ok().flatten();
+                    let Some((start, results)) = taken else {
+                        continue;
+                    };
+                    shading.shade_chunk(
+                        (queries, order.as_slice()),
+                        (k * CHUNK_RUNS, chunks[k], halos.as_slice()),
+                        threshold,
+                        &mut visibility.clone(),
+                        &mut |i, r| results[place[i] as usize - start] = r,
+                        &mut out,
+                    )?;
+                }
+                Ok(out)
             })
-            .try_reduce(BatchStats::default, |mut a, b| {
-                a += b;
+            .try_reduce(Outcome::default, |mut a, mut b| {
+                a.stats += b.stats;
+                a.halo.append(&mut b.halo);
                 Ok(a)
             })?;
         results
             .par_iter_mut()
             .zip(&place)
             .for_each(|(r, &k)| *r = ordered[k as usize]);
-        Ok(stats)
+        blend_halos(results, out.halo, &threshold);
+        Ok(out.stats)
     }
 
     /// Shades the groups `runs` (ranges of `order`, indices into `queries`),
@@ -1171,19 +1377,23 @@ impl<S: Shader> Shading<'_, S> {
     fn shade_chunk<M, V: Visibility>(
         &mut self,
         (queries, order): (&[Query<M>], &[u32]),
-        runs: &[Range<usize>],
+        (first, runs, halos): (usize, &[Range<usize>], &[Halo]),
         threshold: Threshold,
         visibility: &mut V,
         write: &mut impl FnMut(usize, ShadeResult),
-        stats: &mut BatchStats,
+        out: &mut Outcome,
     ) -> Result<(), ShadeError>
     where
         S: Accepts<M>,
     {
         self.scratch.batch.alone_cost = 0.0;
-        for run in runs {
-            let members = &order[run.clone()];
-            self.shade_members(queries, members, threshold, visibility, write, stats)?;
+        for (k, run) in runs.iter().enumerate() {
+            let members = Members {
+                points: &order[run.clone()],
+                halo: halos.get(first + k).map_or(&[], Vec::as_slice),
+                run: (first + k) as u32,
+            };
+            self.shade_members(queries, members, threshold, visibility, write, out)?;
         }
         Ok(())
     }
@@ -1202,33 +1412,34 @@ impl<S: Shader> Shading<'_, S> {
     fn shade_members<M, V: Visibility>(
         &mut self,
         queries: &[Query<M>],
-        members: &[u32],
+        members: Members<'_>,
         threshold: Threshold,
         visibility: &mut V,
         write: &mut impl FnMut(usize, ShadeResult),
-        stats: &mut BatchStats,
+        out: &mut Outcome,
     ) -> Result<(), ShadeError>
     where
         S: Accepts<M>,
     {
-        if members.len() < GROUP_MIN_POINTS {
-            for &i in members {
+        let points = members.points;
+        if points.len() < GROUP_MIN_POINTS {
+            for &i in points {
                 let i = i as usize;
                 write(
                     i,
                     self.shade_alone(&queries[i], threshold, &mut *visibility)?,
                 );
             }
-            stats.points_alone += members.len() as u32;
+            out.stats.points_alone += points.len() as u32;
             return Ok(());
         }
         // Without an estimate yet of what sharing must beat, the shared cut
         // gets the least budget; if that is too little, the first point is
         // shaded alone for an estimate.
         let unknown = self.scratch.batch.alone_cost == 0.0;
-        match self.shade_shared(queries, members, &threshold, visibility, stats) {
+        match self.shade_shared(queries, members, &threshold, visibility, &mut out.stats) {
             Ok(()) => {
-                for (k, &i) in members.iter().enumerate() {
+                for (k, &i) in points.iter().enumerate() {
                     let i = i as usize;
                     if self.scratch.batch.alone[k] {
                         write(
@@ -1239,22 +1450,42 @@ impl<S: Shader> Shading<'_, S> {
                         write(i, self.scratch.batch.results[k]);
                     }
                 }
+                let halo = members.halo.iter().zip(&self.scratch.batch.halo_results);
+                out.halo
+                    .extend(halo.map(|(&(point, weight), &result)| HaloResult {
+                        point,
+                        run: members.run,
+                        weight,
+                        result,
+                    }));
                 Ok(())
             }
             Err(TooCostly) if unknown => {
-                let i = members[0] as usize;
+                let i = points[0] as usize;
                 write(
                     i,
                     self.shade_alone(&queries[i], threshold, &mut *visibility)?,
                 );
-                stats.points_alone += 1;
-                let rest = &members[1..];
-                self.shade_members(queries, rest, threshold, visibility, write, stats)
+                out.stats.points_alone += 1;
+                let rest = Members {
+                    points: &points[1..],
+                    ..members
+                };
+                self.shade_members(queries, rest, threshold, visibility, write, out)
             }
             Err(TooCostly) => {
-                let (a, b) = members.split_at(members.len() / 2);
-                self.shade_members(queries, a, threshold, visibility, write, stats)?;
-                self.shade_members(queries, b, threshold, visibility, write, stats)
+                // The halves share no halo: their points' results are not
+                // blended with their neighbours'.
+                let (a, b) = points.split_at(points.len() / 2);
+                for half in [a, b] {
+                    let half = Members {
+                        points: half,
+                        halo: &[],
+                        ..members
+                    };
+                    self.shade_members(queries, half, threshold, visibility, write, out)?;
+                }
+                Ok(())
             }
         }
     }
@@ -1295,7 +1526,7 @@ impl<S: Shader> Shading<'_, S> {
     fn shade_shared<M, V: Visibility>(
         &mut self,
         queries: &[Query<M>],
-        members: &[u32],
+        members: Members<'_>,
         threshold: &Threshold,
         visibility: &mut V,
         stats: &mut BatchStats,
@@ -1318,7 +1549,7 @@ impl<S: Shader> Shading<'_, S> {
     fn shade_shared_avx2<M, V: Visibility>(
         &mut self,
         queries: &[Query<M>],
-        members: &[u32],
+        members: Members<'_>,
         threshold: &Threshold,
         visibility: &mut V,
         stats: &mut BatchStats,
@@ -1331,7 +1562,7 @@ impl<S: Shader> Shading<'_, S> {
     fn shade_shared_inlined<M, V: Visibility>(
         &mut self,
         queries: &[Query<M>],
-        members: &[u32],
+        members: Members<'_>,
         threshold: &Threshold,
         visibility: &mut V,
         stats: &mut BatchStats,
@@ -1339,9 +1570,12 @@ impl<S: Shader> Shading<'_, S> {
         let Some(kd) = self.shader.diffuse_albedo() else {
             return Err(TooCostly);
         };
-        let surfaces = members.iter().map(|&i| *queries[i as usize].surface());
+        // The group's geometry takes in its halo: the cut serves those points
+        // too.
+        let halo = members.halo.iter().map(|h| &h.0);
+        let surfaces = (members.points.iter().chain(halo)).map(|&i| *queries[i as usize].surface());
         let group = Group::new(surfaces);
-        let samples = Samples::new(queries, members);
+        let samples = Samples::new(queries, members.points);
         let mut scratch = core::mem::take(&mut self.scratch.batch);
         let outcome = self.shared_cut(
             (queries, members),
@@ -1359,13 +1593,14 @@ impl<S: Shader> Shading<'_, S> {
     #[inline(always)]
     fn shared_cut<M, V: Visibility>(
         &self,
-        (queries, members): (&[Query<M>], &[u32]),
+        (queries, group_members): (&[Query<M>], Members<'_>),
         threshold: &Threshold,
         visibility: &mut V,
         stats: &mut BatchStats,
         (kd, group, samples): (DVec3, Group, Samples),
         scratch: &mut BatchScratch,
     ) -> Result<(), TooCostly> {
+        let members = group_members.points;
         scratch.list.clear();
         scratch.steer.clear();
         scratch.lights.clear();
@@ -1468,6 +1703,21 @@ impl<S: Shader> Shading<'_, S> {
                 if alone {
                     darkest = darkest.min(radiance.max_element());
                 }
+            }
+            // The halo's points over the same cut (interpolation only).
+            scratch.halo_results.clear();
+            for &(i, _) in group_members.halo {
+                let (radiance, rays) =
+                    self.point_sum(&queries[i as usize], scratch, cut.visibility);
+                scratch.halo_results.push(ShadeResult {
+                    radiance,
+                    error_bound: bound,
+                    nodes_evaluated: nodes,
+                    lights_evaluated: lights,
+                    classify_queries: 0,
+                    point_queries: rays,
+                    stop: Stop::ThresholdMet,
+                });
             }
             if let Some(b) = blended {
                 cut.unblend(scratch, b);
