@@ -97,6 +97,8 @@ const SAMPLE_GRID: (u32, u32) = (24, 15);
 pub const SEAM_POINTS: usize = 2048;
 const SEAM_LENGTH: f32 = 320.0;
 const SEAM_START: Vec3 = Vec3::new(10.0, 17.0, 0.0);
+/// Columns and lines of the patch of points of the seams rows.
+const GRID: (usize, usize) = (128, 16);
 /// Interpolation band of the seams rows.
 const BAND: f64 = 2.0;
 /// Jumps of the relative error between neighbouring scanline points above
@@ -665,6 +667,65 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
         });
     }
 
+    // The same spacing over a patch, as a renderer hands a tile: groups
+    // border each other along both axes. Jumps between horizontal and
+    // vertical neighbours.
+    let (columns, lines) = GRID;
+    let grid: Vec<Query> = (0..lines)
+        .flat_map(|j| (0..columns).map(move |i| (i, j)))
+        .map(|(i, j)| Query::new(start + Vec3::new(step * i as f32, step * j as f32, 0.0), Vec3::Z))
+        .collect::<Result<_, _>>()?;
+    let grid_exact: Vec<DVec3> = grid
+        .par_iter()
+        .map(|q| tree.shading(shader).exact_query(q, Unoccluded))
+        .collect();
+    let mut grid_results = vec![ShadeResult::default(); grid.len()];
+    for interpolation in [false, true] {
+        let threshold = if interpolation {
+            discrete.with_interpolation(BAND)
+        } else {
+            discrete
+        };
+        let (mut stats, mut times) = (None, Vec::new());
+        for _ in 0..runs {
+            let started = Instant::now();
+            stats = Some(shading.shade_batch(&grid, threshold, Unoccluded, &mut grid_results)?);
+            times.push(started.elapsed().as_secs_f64());
+        }
+        let what = format!("grid, shade_batch, interpolation {interpolation}");
+        check_certified(&what, &grid_results, &grid_exact)?;
+        let errors: Vec<f64> = grid_results
+            .iter()
+            .zip(&grid_exact)
+            .map(|(r, &e)| ((r.radiance - e) / e).max_element())
+            .collect();
+        let at = |i: usize, j: usize| errors[j * columns + i];
+        let mut jumps = Vec::new();
+        for j in 0..lines {
+            for i in 0..columns {
+                if i + 1 < columns {
+                    jumps.push((at(i + 1, j) - at(i, j)).abs());
+                }
+                if j + 1 < lines {
+                    jumps.push((at(i, j + 1) - at(i, j)).abs());
+                }
+            }
+        }
+        let n = grid.len() as f64;
+        rows.push(SeamRow {
+            label: "shade_batch, 128 x 16 patch",
+            interpolation,
+            max_error: max_error(&grid_results, &grid_exact),
+            max_jump: jumps.iter().copied().fold(0.0, f64::max),
+            p99_jump: quantile(&jumps, 0.99),
+            big_jumps: jumps.iter().filter(|&&j| j > JUMP_LEVEL).count(),
+            items: grid_results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / n,
+            micros: median(times) * 1e6 / n,
+            errors,
+            stats,
+        });
+    }
+
     println!(
         "### Seams: {SEAM_POINTS} ground points along x from ({:.0}, {:.0}), {SEAM_LENGTH} units \
         ({:.1} blocks, {:.3} units apart), certified 1%, interpolation band {BAND}\n",
@@ -677,7 +738,11 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
         "  relative error = largest channel of (L - exact) / exact against exact_query at every \
          point; jump = its change between neighbouring points; time: median of {runs} runs, one \
          core. With interpolation the batch call blends each shared cut's last nodes with their \
-         children.\n"
+         children, and each point near a group's border with the neighbouring groups' cuts. The \
+         patch rows: a {}x{} grid of points at the same spacing from the same start, one batch \
+         call, jumps between horizontal and vertical neighbours.\n",
+        GRID.0,
+        GRID.1
     );
     println!(
         "| call | interpolation | max rel. error | largest jump | 99th percentile jump | jumps > \
@@ -732,15 +797,16 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
     fs::write(&path, text)?;
     println!("  wrote {}", path.display());
 
+    let scanline = &rows[..configurations.len()];
     let mut text = String::from("x,y");
-    for r in &rows {
+    for r in scanline {
         let on = if r.interpolation { "_interpolated" } else { "" };
         let _ = write!(text, ",{}{on}", r.label);
     }
     text.push('\n');
     for (i, p) in points.iter().enumerate() {
         let _ = write!(text, "{},{}", p.x, p.y);
-        for r in &rows {
+        for r in scanline {
             let _ = write!(text, ",{:.6e}", r.errors[i]);
         }
         text.push('\n');
