@@ -371,8 +371,8 @@ fn a_results_slice_of_the_wrong_length_is_an_error() {
 #[test]
 fn the_parallel_batch_gives_the_same_bits() {
     let (tree, mut queries) = street_patch();
-    // Scattered points too, so that some groups split and some points are
-    // shaded alone.
+    // Scattered points too, so that some groups do not pay and are shaded
+    // point by point.
     queries.extend((0..64).map(|k| {
         let x = (k * 977 % 30_000) as f32;
         Query::new(

@@ -673,7 +673,12 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
     let (columns, lines) = GRID;
     let grid: Vec<Query> = (0..lines)
         .flat_map(|j| (0..columns).map(move |i| (i, j)))
-        .map(|(i, j)| Query::new(start + Vec3::new(step * i as f32, step * j as f32, 0.0), Vec3::Z))
+        .map(|(i, j)| {
+            Query::new(
+                start + Vec3::new(step * i as f32, step * j as f32, 0.0),
+                Vec3::Z,
+            )
+        })
         .collect::<Result<_, _>>()?;
     let grid_exact: Vec<DVec3> = grid
         .par_iter()
@@ -719,7 +724,11 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
             max_jump: jumps.iter().copied().fold(0.0, f64::max),
             p99_jump: quantile(&jumps, 0.99),
             big_jumps: jumps.iter().filter(|&&j| j > JUMP_LEVEL).count(),
-            items: grid_results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / n,
+            items: grid_results
+                .iter()
+                .map(|r| f64::from(r.cost()))
+                .sum::<f64>()
+                / n,
             micros: median(times) * 1e6 / n,
             errors,
             stats,
@@ -741,8 +750,7 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
          children, and each point near a group's border with the neighbouring groups' cuts. The \
          patch rows: a {}x{} grid of points at the same spacing from the same start, one batch \
          call, jumps between horizontal and vertical neighbours.\n",
-        GRID.0,
-        GRID.1
+        GRID.0, GRID.1
     );
     println!(
         "| call | interpolation | max rel. error | largest jump | 99th percentile jump | jumps > \
