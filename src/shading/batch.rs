@@ -1197,10 +1197,10 @@ impl<S: Shader> Shading<'_, S> {
     /// [`shade_query`](Self::shade_query) for each.
     ///
     /// Speed: on a 10^6-light street city seen from above the streets, one
-    /// core, certified 1% per pixel, the batch call took about 1.5 us per
-    /// pixel, 1,100 times less than a vectorized exact sum and about 8 times
-    /// less than shading each pixel on its own (`cargo run --release -p
-    /// manylights-report -- batch`, two runs: 1104x and 1111x).
+    /// core, certified 1% per pixel, the batch call took about 1.4 us per
+    /// pixel, about 1,170 times less than a vectorized exact sum and 8.5
+    /// times less than shading each pixel on its own (`cargo run --release
+    /// -p manylights-report -- batch`, two runs: 1170x and 1175x).
     ///
     /// Allocation: a call allocates its Morton order and group list (linear
     /// in the batch); the session's scratch space is reused across calls.
