@@ -598,6 +598,36 @@ fn write_images(
     Ok(())
 }
 
+/// A row of the seams table: `results` against `exact`, with the jumps of
+/// the relative error between the neighbours that `jumps` pairs, and the
+/// call's `times` (seconds per run).
+fn seam_row(
+    (label, interpolation): (&'static str, bool),
+    (results, exact): (&[ShadeResult], &[DVec3]),
+    jumps: impl Fn(&[f64]) -> Vec<f64>,
+    (times, stats): (Vec<f64>, Option<BatchStats>),
+) -> SeamRow {
+    let errors: Vec<f64> = results
+        .iter()
+        .zip(exact)
+        .map(|(r, &e)| ((r.radiance - e) / e).max_element())
+        .collect();
+    let jumps = jumps(&errors);
+    let n = results.len() as f64;
+    SeamRow {
+        label,
+        interpolation,
+        max_error: max_error(results, exact),
+        max_jump: jumps.iter().copied().fold(0.0, f64::max),
+        p99_jump: quantile(&jumps, 0.99),
+        big_jumps: jumps.iter().filter(|&&j| j > JUMP_LEVEL).count(),
+        items: results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / n,
+        micros: median(times) * 1e6 / n,
+        errors,
+        stats,
+    }
+}
+
 /// The scanline: [`SEAM_POINTS`] ground points from `start` along `+x`,
 /// shaded at 1% by one batch call and by `shade_query` point by point, each
 /// with and without interpolation; prints the table and writes
@@ -625,13 +655,16 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
         ("shade_query", false),
         ("shade_query", true),
     ];
-    let mut rows = Vec::new();
-    for (label, interpolation) in configurations {
-        let threshold = if interpolation {
+    let with_band = |interpolation: bool| {
+        if interpolation {
             discrete.with_interpolation(BAND)
         } else {
             discrete
-        };
+        }
+    };
+    let mut rows = Vec::new();
+    for (label, interpolation) in configurations {
+        let threshold = with_band(interpolation);
         let (mut stats, mut times) = (None, Vec::new());
         for _ in 0..runs {
             let started = Instant::now();
@@ -646,25 +679,12 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
         }
         let what = format!("scanline, {label}, interpolation {interpolation}");
         check_certified(&what, &results, &exact)?;
-        let errors: Vec<f64> = results
-            .iter()
-            .zip(&exact)
-            .map(|(r, &e)| ((r.radiance - e) / e).max_element())
-            .collect();
-        let jumps: Vec<f64> = errors.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-        let n = queries.len() as f64;
-        rows.push(SeamRow {
-            label,
-            interpolation,
-            max_error: max_error(&results, &exact),
-            max_jump: jumps.iter().copied().fold(0.0, f64::max),
-            p99_jump: quantile(&jumps, 0.99),
-            big_jumps: jumps.iter().filter(|&&j| j > JUMP_LEVEL).count(),
-            items: results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / n,
-            micros: median(times) * 1e6 / n,
-            errors,
-            stats,
-        });
+        rows.push(seam_row(
+            (label, interpolation),
+            (&results, &exact),
+            |errors| errors.windows(2).map(|w| (w[1] - w[0]).abs()).collect(),
+            (times, stats),
+        ));
     }
 
     // The same spacing over a patch, as a renderer hands a tile: groups
@@ -686,11 +706,7 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
         .collect();
     let mut grid_results = vec![ShadeResult::default(); grid.len()];
     for interpolation in [false, true] {
-        let threshold = if interpolation {
-            discrete.with_interpolation(BAND)
-        } else {
-            discrete
-        };
+        let threshold = with_band(interpolation);
         let (mut stats, mut times) = (None, Vec::new());
         for _ in 0..runs {
             let started = Instant::now();
@@ -699,40 +715,27 @@ fn run_seams(out: &Path, tree: &LightTree, start: Vec3, runs: usize) -> Result<(
         }
         let what = format!("grid, shade_batch, interpolation {interpolation}");
         check_certified(&what, &grid_results, &grid_exact)?;
-        let errors: Vec<f64> = grid_results
-            .iter()
-            .zip(&grid_exact)
-            .map(|(r, &e)| ((r.radiance - e) / e).max_element())
-            .collect();
-        let at = |i: usize, j: usize| errors[j * columns + i];
-        let mut jumps = Vec::new();
-        for j in 0..lines {
-            for i in 0..columns {
-                if i + 1 < columns {
-                    jumps.push((at(i + 1, j) - at(i, j)).abs());
-                }
-                if j + 1 < lines {
-                    jumps.push((at(i, j + 1) - at(i, j)).abs());
+        let jumps = |errors: &[f64]| {
+            let at = |i: usize, j: usize| errors[j * columns + i];
+            let mut jumps = Vec::new();
+            for j in 0..lines {
+                for i in 0..columns {
+                    if i + 1 < columns {
+                        jumps.push((at(i + 1, j) - at(i, j)).abs());
+                    }
+                    if j + 1 < lines {
+                        jumps.push((at(i, j + 1) - at(i, j)).abs());
+                    }
                 }
             }
-        }
-        let n = grid.len() as f64;
-        rows.push(SeamRow {
-            label: "shade_batch, 128 x 16 patch",
-            interpolation,
-            max_error: max_error(&grid_results, &grid_exact),
-            max_jump: jumps.iter().copied().fold(0.0, f64::max),
-            p99_jump: quantile(&jumps, 0.99),
-            big_jumps: jumps.iter().filter(|&&j| j > JUMP_LEVEL).count(),
-            items: grid_results
-                .iter()
-                .map(|r| f64::from(r.cost()))
-                .sum::<f64>()
-                / n,
-            micros: median(times) * 1e6 / n,
-            errors,
-            stats,
-        });
+            jumps
+        };
+        rows.push(seam_row(
+            ("shade_batch, 128 x 16 patch", interpolation),
+            (&grid_results, &grid_exact),
+            jumps,
+            (times, stats),
+        ));
     }
 
     println!(
