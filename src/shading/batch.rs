@@ -1243,9 +1243,10 @@ impl<S: Shader> Shading<'_, S> {
     ///
     /// Speed: on a 10^6-light street city seen from above the streets, one
     /// core, certified 1% per pixel, the batch call took about 1.4 us per
-    /// pixel, about 1,170 times less than a vectorized exact sum and 8.5
+    /// pixel, about 1,240 times less than a vectorized exact sum and 8.8
     /// times less than shading each pixel on its own (`cargo run --release
-    /// -p manylights-report -- batch`, two runs: 1170x and 1175x).
+    /// -p manylights-report`, the full report and its batch part: 1235x and
+    /// 1244x).
     ///
     /// Allocation: a call allocates its Morton order and group list (linear
     /// in the batch); the session's scratch space is reused across calls.
