@@ -60,9 +60,13 @@ const GROUP_POINTS: usize = 128;
 /// halo holds it (see [`blend_halos`]). A group of 128 pixels is about 11
 /// pixels across, so a quarter blends over about 3 pixels on each side of
 /// a border. On a scanline of 128-point groups, a sixteenth left jumps of
-/// 2.2e-5, an eighth 1.2e-5, a quarter 7.0e-6; on the report's camera view
-/// an interpolated call took 2.4, 2.9 and 3.6 us per pixel (2.0 with no
-/// halo).
+/// 2.2e-5, an eighth 1.2e-5, a quarter 7.0e-6; over a 128 x 16 patch of
+/// points (borders along both axes) an eighth left 3.4e-5, three
+/// sixteenths 2.0e-5, a quarter 1.4e-5 (point-by-point interpolation:
+/// 2.6e-5 on the scanline). On a 320 x 180 camera view of the street city
+/// at 10^6 lights an interpolated call took 2.4, 2.9 and 3.6 us per pixel
+/// (2.0 with no halo), in scratch timings of an earlier version; the
+/// current one takes 4.0 us with a quarter and 2.3 us with no halo.
 const HALO_SHARE: f64 = 0.25;
 /// Fewest points worth a shared cut: smaller groups are shaded point by
 /// point.
@@ -1050,6 +1054,16 @@ fn morton_cells(codes: &[u64], range: Range<usize>, cells: &mut Vec<Range<usize>
     morton_cells(codes, mid..range.end, cells);
 }
 
+/// The bounding box of the points of `queries` at `indices`.
+fn points_box<M>(queries: &[Query<M>], indices: &[u32]) -> (DVec3, DVec3) {
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for &i in indices {
+        let p = queries[i as usize].surface().point;
+        (lo, hi) = (lo.min(p), hi.max(p));
+    }
+    (lo, hi)
+}
+
 /// Each group's halo when `threshold` interpolates (none otherwise, and
 /// none for Lightcuts' per-node target): the points of other groups whose
 /// distance to the group's points' box is less than the halo width,
@@ -1070,11 +1084,7 @@ fn halos<M>(
     let boxes: Vec<(DVec3, DVec3, f64)> = runs
         .iter()
         .map(|run| {
-            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-            for k in run.clone() {
-                let p = surface(k).point;
-                (lo, hi) = (lo.min(p), hi.max(p));
-            }
+            let (lo, hi) = points_box(queries, &order[run.clone()]);
             (lo, hi, HALO_SHARE * (hi - lo).max_element())
         })
         .collect();
@@ -1151,6 +1161,8 @@ fn blend_halos(results: &mut [ShadeResult], mut halo: Vec<HaloResult>, threshold
         let rounding = (2 * same.len() + 6) as f64 * f64::EPSILON;
         blended.radiance = radiance / weight;
         blended.error_bound = bound / weight * (1.0 + rounding) + blended.radiance * rounding;
+        // No largest node error: halos are only formed for relative and
+        // absolute targets, whose check does not read it.
         if threshold.met(blended.radiance, blended.error_bound, 0.0) {
             *own = blended;
         }
@@ -1215,9 +1227,10 @@ impl<S: Shader> Shading<'_, S> {
     /// the largest jump of the relative error between neighbours fell from
     /// 1.95e-4 to 7.0e-6 (below point-by-point interpolation's 2.6e-5), and
     /// over a 128 x 16 patch of points from 7.5e-5 to 1.4e-5. The halo
-    /// costs: on the report's camera view, certified 1%, one call with
-    /// interpolation took 3.6 us per pixel, 2.0 us with no halo and 1.5 us
-    /// without interpolation (one scratch run).
+    /// costs: on a 320 x 180 camera view of the street city at 10^6
+    /// lights, certified 1%, one call with interpolation took 4.0-4.1 us per
+    /// pixel, 2.3 us with no halo and 1.5 us without interpolation (two
+    /// scratch timings).
     ///
     /// A point's [`ShadeResult::nodes_evaluated`] then counts the node
     /// estimates it summed (cheaper than bounds) and
@@ -1374,16 +1387,11 @@ impl<S: Shader> Shading<'_, S> {
         // against 1.67x and 1.64x in Morton order, the exact sum's own
         // 1.97-2.00x in the same runs).
         let mut queue: Vec<(f64, usize)> = chunks
-            .iter()
+            .par_iter()
             .enumerate()
             .map(|(k, chunk)| {
-                let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-                for run in *chunk {
-                    for &i in &order[run.clone()] {
-                        let p = queries[i as usize].surface().point;
-                        (lo, hi) = (lo.min(p), hi.max(p));
-                    }
-                }
+                let places = chunk[0].start..chunk[chunk.len() - 1].end;
+                let (lo, hi) = points_box(queries, &order[places]);
                 (-(hi - lo).max_element(), k)
             })
             .collect();
