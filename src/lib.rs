@@ -97,7 +97,13 @@
 //! errors outward (the slacks of [`numeric`], upward rounding of stored
 //! radii, moments and harmonic norms), and the cut folds its own `f64` summation error into
 //! the bound; the allowance covers what is left, the relative rounding of
-//! single terms and of the reference sum.
+//! single terms and of the reference sum. The batch call
+//! ([`Shading::shade_batch`]) sums a shared cut's estimates in `f32` lanes
+//! when the cut's certified error is at least `2^-12` of the radiance it
+//! aims at; each point then bounds the whole rounding of its `f32` sum
+//! (the offsets, every operation, the lanes' sums; a few hundred `f32`
+//! ulps of the terms' magnitudes, summed beside them) and its bound
+//! includes it, so the contract is the same.
 //!
 //! Where a term jumps, no allowance is needed, and none is widened: a
 //! single light's term is exactly 0 when the model's is (in the tangent

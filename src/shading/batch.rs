@@ -8,7 +8,7 @@ use glam::{DVec3, Vec3};
 
 use super::blend;
 use super::error_list::{Class, Entry, ErrorList, Seen};
-use super::packed::Packed;
+use super::packed::{Limits, Packed, PackedSum, Spread};
 use super::refine::{region, reported_bound};
 use super::{Accepts, Query, ShadeResult, Shading, Stop, Target, Threshold};
 use crate::ShadeError;
@@ -352,12 +352,15 @@ pub(crate) struct BatchScratch {
     /// Single lights of the cut that the host saw partially from the
     /// group: asked point-to-point and evaluated exactly at each point.
     shadowed: Vec<(DVec3, DVec3)>,
-    /// Single lights of the cut above every tangent plane: position and
+    /// Single lights of the cut above every tangent plane: position,
     /// intensity times `kd`.
     above: Vec<(DVec3, DVec3)>,
     /// The nodes and the lights above every plane, packed for the points'
     /// sums.
     packed: Packed,
+    /// The points to sum over the packed entries, and their sums.
+    surfaces: Vec<(DVec3, DVec3)>,
+    packed_sums: Vec<PackedSum>,
     /// Nodes of a blended cut with their weights.
     weighted: Vec<(u32, f64)>,
     /// Each entry's values at the samples, by slot.
@@ -388,6 +391,8 @@ struct SharedCut<'a, V> {
     /// The summed errors of the single lights above every plane (times
     /// `kd`), summed plainly (see [`packed_bound`]).
     light_error: DVec3,
+    /// How far the entries that may be packed lie from the group.
+    spread: Spread,
     /// Running sums of the samples' values of the waiting entries.
     steer_waiting: [DVec3; SAMPLES],
     evaluations: u64,
@@ -433,6 +438,10 @@ struct Pending {
     depth: f64,
     /// The nearest distance less the node's radius.
     gap: f64,
+    /// No point nearer the centroid than `nearest`, which lies `distance`
+    /// from the group's centre.
+    nearest: f64,
+    distance: f64,
 }
 
 /// A child of a node being refined, between the passes of
@@ -512,8 +521,10 @@ impl<V: Visibility> SharedCut<'_, V> {
             // is the rounding of its cosine and of the offset (see
             // `SERIES_SLACK` and `POINT_SLACK`), at the nearest distance.
             Side::Above(lowest) => {
-                let inv = 1.0 / self.group.nearest(distance, lowest);
+                let nearest = self.group.nearest(distance, lowest);
+                let inv = 1.0 / nearest;
                 self.light_error += scaled * ((inv * inv) * (SERIES_SLACK + POINT_SLACK));
+                self.spread.note(nearest, distance);
                 scratch.above.push((position, scaled));
             }
             // Evaluated by the shader at each point.
@@ -656,6 +667,7 @@ impl<V: Visibility> SharedCut<'_, V> {
                 Ok(None) => Child::Skip,
                 Err(()) => Child::Near,
                 Ok(Some(pending)) => {
+                    self.spread.note(pending.nearest, pending.distance);
                     bounded[count] = (k, c, pending.view);
                     count += 1;
                     Child::Bound(pending, DVec3::ZERO)
@@ -711,8 +723,9 @@ impl<V: Visibility> SharedCut<'_, V> {
     /// plane); `Ok(None)` for a node below every tangent plane, `Err(())`
     /// for one whose ball comes too near the group.
     #[inline(always)]
-    fn shared_bound(&self, node: &Node) -> Result<Option<DVec3>, ()> {
+    fn shared_bound(&mut self, node: &Node) -> Result<Option<DVec3>, ()> {
         Ok(self.shared_view(node)?.map(|pending| {
+            self.spread.note(pending.nearest, pending.distance);
             let width = shared_width(node, &pending.view);
             self.shared_error(node, &pending, width)
         }))
@@ -742,6 +755,8 @@ impl<V: Visibility> SharedCut<'_, V> {
             view: group.view(node, inv_nearest, distance),
             depth,
             gap: nearest - radius,
+            nearest,
+            distance,
         }))
     }
 
@@ -923,7 +938,7 @@ impl<V: Visibility> SharedCut<'_, V> {
 /// `m * 2^-53 (exact + error)`: the exact part falls within the rounding
 /// allowance (`m <= 2^16`), the error part is added here.
 fn packed_bound(error: DVec3, entries: usize) -> DVec3 {
-    let lane_terms = (entries / super::packed::LANES + 2) as f64;
+    let lane_terms = (entries / super::packed::WIDE + 2) as f64;
     reported_bound(error) * (1.0 + lane_terms * f64::EPSILON)
 }
 
@@ -1689,6 +1704,7 @@ impl<S: Shader> Shading<'_, S> {
             samples,
             steer_settled: [DVec3::ZERO; SAMPLES],
             light_error: DVec3::ZERO,
+            spread: Spread::default(),
             steer_waiting: [DVec3::ZERO; SAMPLES],
             evaluations: 0,
             points: members.len() as u64,
@@ -1700,6 +1716,20 @@ impl<S: Shader> Shading<'_, S> {
         if !self.tree.nodes.is_empty() {
             cut.enter(scratch, 0, false);
         }
+        // Every entry lies within the root's box and is at most the root's
+        // intensity (blend weights are at most 1); the points lie within
+        // the group's ball.
+        let limits = self.tree.nodes.first().map_or(
+            Limits {
+                brightest: 0.0,
+                extent: 0.0,
+            },
+            |root| Limits {
+                brightest: (root.intensity * kd).max_element(),
+                extent: f64::from(root.aabb.min.abs().max(root.aabb.max.abs()).max_element())
+                    .max(cut.group.centre.abs().max_element() + cut.group.radius),
+            },
+        );
         let mut margin = FIRST_MARGIN;
         scratch.alone.clear();
         scratch.alone.resize(members.len(), false);
@@ -1726,35 +1756,40 @@ impl<S: Shader> Shading<'_, S> {
             (cut.evaluations, cut.classifications) = (0, 0);
             outcome?;
             // The points' sums over the cut.
-            scratch.packed.clear();
             let error = match &blended {
-                Some(b) => {
+                Some(b) => b.error * (1.0 + scratch.weighted.len() as f64 * f64::EPSILON),
+                None => error,
+            };
+            let light_error = cut.light_error * (1.0 + scratch.above.len() as f64 * f64::EPSILON);
+            let error = error + light_error;
+            scratch
+                .packed
+                .start(error, cut.steering(), cut.spread, limits);
+            match &blended {
+                Some(_) => {
                     for &(node, weight) in &scratch.weighted {
                         let node = &self.tree.nodes[node as usize];
                         scratch.packed.push_node(node, kd * weight);
                     }
-                    b.error * (1.0 + scratch.weighted.len() as f64 * f64::EPSILON)
                 }
                 None => {
                     for (e, _) in scratch.list.waiting() {
                         let node = &self.tree.nodes[e.node as usize];
                         scratch.packed.push_node(node, kd);
                     }
-                    error
                 }
-            };
+            }
             for &(position, intensity) in &scratch.above {
                 scratch.packed.push_light(position.as_vec3(), intensity);
             }
-            let light_error = cut.light_error * (1.0 + scratch.above.len() as f64 * f64::EPSILON);
-            let bound = packed_bound(error + light_error, scratch.packed.len());
+            let bound = packed_bound(error, scratch.packed.len());
             let nodes = scratch.packed.len() as u32 - scratch.above.len() as u32;
             let lights =
                 (scratch.lights.len() + scratch.above.len() + scratch.shadowed.len()) as u32;
             // A point's result over this round's cut.
-            let shared = |radiance, point_queries| ShadeResult {
+            let shared = |radiance, point_queries, rounding| ShadeResult {
                 radiance,
-                error_bound: bound,
+                error_bound: bound + rounding,
                 nodes_evaluated: nodes,
                 lights_evaluated: lights,
                 classify_queries: 0,
@@ -1767,14 +1802,33 @@ impl<S: Shader> Shading<'_, S> {
             // the points that missed. (Interpolated points all take the last
             // round's blend, which keeps the group's image smooth.)
             let keep_met = round > 0 && threshold.interpolation().is_none();
-            for (k, &i) in members.iter().enumerate() {
+            // The packed sums of the members to shade, then of the halo's
+            // points, several points at a time.
+            scratch.surfaces.clear();
+            let to_shade = |&(k, _): &(usize, &u32)| !keep_met || scratch.alone[k];
+            for (_, &i) in members.iter().enumerate().filter(to_shade) {
+                let surface = queries[i as usize].surface();
+                scratch.surfaces.push((surface.point, surface.normal));
+            }
+            for &(i, _) in group_members.halo {
+                let surface = queries[i as usize].surface();
+                scratch.surfaces.push((surface.point, surface.normal));
+            }
+            scratch
+                .packed
+                .sums(&scratch.surfaces, &mut scratch.packed_sums);
+            let packed_sums = core::mem::take(&mut scratch.packed_sums);
+            let mut sums = packed_sums.iter().copied();
+            let mut next = || sums.next().expect("one sum per point");
+            for k in 0..members.len() {
                 if keep_met && !scratch.alone[k] {
                     continue;
                 }
-                let (radiance, rays) =
-                    self.point_sum(&queries[i as usize], scratch, cut.visibility);
-                scratch.results[k] = shared(radiance, rays);
-                let alone = !threshold.met(radiance, bound, largest);
+                let query = &queries[members[k] as usize];
+                let packed: PackedSum = next();
+                let (radiance, rays) = self.point_sum(query, scratch, cut.visibility, packed.value);
+                scratch.results[k] = shared(radiance, rays, packed.rounding);
+                let alone = !threshold.met(radiance, scratch.results[k].error_bound, largest);
                 scratch.alone[k] = alone;
                 if alone {
                     darkest = darkest.min(radiance.max_element());
@@ -1783,10 +1837,14 @@ impl<S: Shader> Shading<'_, S> {
             // The halo's points over the same cut (interpolation only).
             scratch.halo_results.clear();
             for &(i, _) in group_members.halo {
-                let (radiance, rays) =
-                    self.point_sum(&queries[i as usize], scratch, cut.visibility);
-                scratch.halo_results.push(shared(radiance, rays));
+                let query = &queries[i as usize];
+                let packed: PackedSum = next();
+                let (radiance, rays) = self.point_sum(query, scratch, cut.visibility, packed.value);
+                scratch
+                    .halo_results
+                    .push(shared(radiance, rays, packed.rounding));
             }
+            scratch.packed_sums = packed_sums;
             if let Some(b) = blended {
                 cut.unblend(scratch, b);
             }
@@ -1810,15 +1868,16 @@ impl<S: Shader> Shading<'_, S> {
         Ok(())
     }
 
-    /// One point's sum over the shared cut in `scratch`, clamped at 0 (the
-    /// exact value is non-negative), and the point-to-point queries it
-    /// asked.
+    /// One point's sum over the shared cut in `scratch`, its packed
+    /// entries' sum `packed` given, clamped at 0 (the exact value is
+    /// non-negative), and the point-to-point queries it asked.
     #[inline(always)]
     fn point_sum<M, V: Visibility>(
         &self,
         query: &Query<M>,
         scratch: &BatchScratch,
         visibility: &mut V,
+        packed: DVec3,
     ) -> (DVec3, u32) {
         let surface = query.surface();
         let mut sum = CompensatedSum::default();
@@ -1838,7 +1897,7 @@ impl<S: Shader> Shading<'_, S> {
                 }
             }
         }
-        sum.add(scratch.packed.sum(surface.point, surface.normal));
+        sum.add(packed);
         (sum.value().max(DVec3::ZERO), rays)
     }
 }
