@@ -8,7 +8,7 @@ use glam::{DVec3, Vec3};
 
 use super::blend;
 use super::error_list::{Class, Entry, ErrorList, Seen};
-use super::packed::{Limits, Packed, PackedSum, Spread};
+use super::packed::{Limits, Packed, Spread};
 use super::refine::{region, reported_bound};
 use super::{Accepts, Query, ShadeResult, Shading, Stop, Target, Threshold};
 use crate::ShadeError;
@@ -358,9 +358,6 @@ pub(crate) struct BatchScratch {
     /// The nodes and the lights above every plane, packed for the points'
     /// sums.
     packed: Packed,
-    /// The points to sum over the packed entries, and their sums.
-    surfaces: Vec<(DVec3, DVec3)>,
-    packed_sums: Vec<PackedSum>,
     /// Nodes of a blended cut with their weights.
     weighted: Vec<(u32, f64)>,
     /// Each entry's values at the samples, by slot.
@@ -1807,32 +1804,13 @@ impl<S: Shader> Shading<'_, S> {
             // the points that missed. (Interpolated points all take the last
             // round's blend, which keeps the group's image smooth.)
             let keep_met = round > 0 && threshold.interpolation().is_none();
-            // The packed sums of the members to shade, then of the halo's
-            // points, several points at a time.
-            scratch.surfaces.clear();
-            let to_shade = |&(k, _): &(usize, &u32)| !keep_met || scratch.alone[k];
-            for (_, &i) in members.iter().enumerate().filter(to_shade) {
-                let surface = queries[i as usize].surface();
-                scratch.surfaces.push((surface.point, surface.normal));
-            }
-            for &(i, _) in group_members.halo {
-                let surface = queries[i as usize].surface();
-                scratch.surfaces.push((surface.point, surface.normal));
-            }
-            scratch
-                .packed
-                .sums(&scratch.surfaces, &mut scratch.packed_sums);
-            let packed_sums = core::mem::take(&mut scratch.packed_sums);
-            let mut sums = packed_sums.iter().copied();
-            let mut next = || sums.next().expect("one sum per point");
-            for k in 0..members.len() {
+            for (k, &i) in members.iter().enumerate() {
                 if keep_met && !scratch.alone[k] {
                     continue;
                 }
-                let query = &queries[members[k] as usize];
-                let packed: PackedSum = next();
-                let (radiance, rays) = self.point_sum(query, scratch, cut.visibility, packed.value);
-                scratch.results[k] = shared(radiance, rays, packed.rounding);
+                let (radiance, rays, rounding) =
+                    self.point_sum(&queries[i as usize], scratch, cut.visibility);
+                scratch.results[k] = shared(radiance, rays, rounding);
                 let alone = !threshold.met(radiance, scratch.results[k].error_bound, largest);
                 scratch.alone[k] = alone;
                 if alone {
@@ -1842,14 +1820,10 @@ impl<S: Shader> Shading<'_, S> {
             // The halo's points over the same cut (interpolation only).
             scratch.halo_results.clear();
             for &(i, _) in group_members.halo {
-                let query = &queries[i as usize];
-                let packed: PackedSum = next();
-                let (radiance, rays) = self.point_sum(query, scratch, cut.visibility, packed.value);
-                scratch
-                    .halo_results
-                    .push(shared(radiance, rays, packed.rounding));
+                let (radiance, rays, rounding) =
+                    self.point_sum(&queries[i as usize], scratch, cut.visibility);
+                scratch.halo_results.push(shared(radiance, rays, rounding));
             }
-            scratch.packed_sums = packed_sums;
             if let Some(b) = blended {
                 cut.unblend(scratch, b);
             }
@@ -1873,17 +1847,17 @@ impl<S: Shader> Shading<'_, S> {
         Ok(())
     }
 
-    /// One point's sum over the shared cut in `scratch`, its packed
-    /// entries' sum `packed` given, clamped at 0 (the exact value is
-    /// non-negative), and the point-to-point queries it asked.
+    /// One point's sum over the shared cut in `scratch`, clamped at 0 (the
+    /// exact value is non-negative), the point-to-point queries it asked,
+    /// and the bound on the rounding of its packed sum when that was in
+    /// `f32` (else 0).
     #[inline(always)]
     fn point_sum<M, V: Visibility>(
         &self,
         query: &Query<M>,
         scratch: &BatchScratch,
         visibility: &mut V,
-        packed: DVec3,
-    ) -> (DVec3, u32) {
+    ) -> (DVec3, u32, DVec3) {
         let surface = query.surface();
         let mut sum = CompensatedSum::default();
         let mut rays = 0;
@@ -1902,8 +1876,9 @@ impl<S: Shader> Shading<'_, S> {
                 }
             }
         }
-        sum.add(packed);
-        (sum.value().max(DVec3::ZERO), rays)
+        let packed = scratch.packed.sum(surface.point, surface.normal);
+        sum.add(packed.value);
+        (sum.value().max(DVec3::ZERO), rays, packed.rounding)
     }
 }
 

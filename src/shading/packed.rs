@@ -604,248 +604,71 @@ impl Packed {
         self.narrow.push_light(&v);
     }
 
-    /// The sums of every entry's degree-2 estimate at each point of
-    /// `surfaces` (an `f32` point, a unit normal) into `sums`, in `f32`
-    /// when [`start`](Self::start) chose that frame (with the bound on
-    /// that rounding).
+    /// The sum of every entry's degree-2 estimate at `point` (an `f32`
+    /// value, as a `Surface`'s) with unit normal `normal`, in `f32` when
+    /// [`start`](Self::start) chose that frame (with the bound on that
+    /// rounding).
     ///
-    /// Every entry must lie farther from each point than its radius (the
-    /// shared cut guarantees it), so `D > 0`; and the points must lie
-    /// within the group that [`start`](Self::start) was told of.
+    /// Every entry must lie farther from the point than its radius (the
+    /// shared cut guarantees it), so `D > 0`; and the point must lie within
+    /// the group that [`start`](Self::start) was told of.
     // Calling the copies compiled for wider vectors once the processor is
     // known to have them is one of the crate's unsafe blocks (see
     // `dispatch`).
     #[allow(unsafe_code)]
-    pub(crate) fn sums(&self, surfaces: &[(DVec3, DVec3)], sums: &mut Vec<PackedSum>) {
-        sums.clear();
+    pub(crate) fn sum(&self, point: DVec3, normal: DVec3) -> PackedSum {
         #[cfg(target_arch = "x86_64")]
         {
             if crate::dispatch::avx512f() {
                 // SAFETY: the processor has AVX-512F (`dispatch` checked).
-                return unsafe { self.sums_avx512(surfaces, sums) };
+                return unsafe { self.sum_avx512(point, normal) };
             }
             if crate::dispatch::avx2() {
                 // SAFETY: the processor has AVX2 (`dispatch` checked).
-                return unsafe { self.sums_avx2(surfaces, sums) };
+                return unsafe { self.sum_avx2(point, normal) };
             }
         }
-        self.sums_lanes(surfaces, sums);
+        self.sum_lanes(point, normal)
     }
 
-    /// [`sums`](Self::sums) compiled for AVX-512 (a vector holds 8 `f64` or
+    /// [`sum`](Self::sum) compiled for AVX-512 (a vector holds 8 `f64` or
     /// 16 `f32` lanes). Rust never fuses a multiply and an add, so the
     /// results are the same bits.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    fn sums_avx512(&self, surfaces: &[(DVec3, DVec3)], sums: &mut Vec<PackedSum>) {
-        self.sums_lanes(surfaces, sums);
+    fn sum_avx512(&self, point: DVec3, normal: DVec3) -> PackedSum {
+        self.sum_lanes(point, normal)
     }
 
-    /// [`sums`](Self::sums) compiled for AVX2.
+    /// [`sum`](Self::sum) compiled for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn sums_avx2(&self, surfaces: &[(DVec3, DVec3)], sums: &mut Vec<PackedSum>) {
-        self.sums_lanes(surfaces, sums);
+    fn sum_avx2(&self, point: DVec3, normal: DVec3) -> PackedSum {
+        self.sum_lanes(point, normal)
     }
 
-    /// The sums themselves, inlined into each of the above.
+    /// The sum itself, inlined into each of the above. (No closures here:
+    /// a closure is not compiled for the caller's target features.)
     #[inline(always)]
-    fn sums_lanes(&self, surfaces: &[(DVec3, DVec3)], sums: &mut Vec<PackedSum>) {
-        // (Loops, not closures: a closure is not compiled for the caller's
-        // target features.)
+    fn sum_lanes(&self, point: DVec3, normal: DVec3) -> PackedSum {
         let Some(frame) = self.frame else {
-            for (p, n) in surfaces {
-                let (sum, _) = self.wide.sum(p.to_array(), n.to_array());
-                sums.push(PackedSum {
-                    value: DVec3::from_array(sum),
-                    rounding: DVec3::ZERO,
-                });
-            }
-            return;
+            let (sum, _) = self.wide.sum(point.to_array(), normal.to_array());
+            return PackedSum {
+                value: DVec3::from_array(sum),
+                rounding: DVec3::ZERO,
+            };
         };
-        let lit = self.lit.cmpgt(DVec3::ZERO);
-        let underflow = self.lit * 2f64.powi(-126);
-        for (p, n) in surfaces {
-            // The points are `f32` values (a `Surface`'s), so exactly
-            // scaled.
-            let p = (*p * frame.scale).as_vec3().to_array();
-            let (sum, envelope) = self.narrow.sum(p, n.as_vec3().to_array());
-            let rounding = DVec3::splat(envelope * (1.002 * U32)) + underflow;
-            sums.push(PackedSum {
-                value: DVec3::from_array(sum) * frame.out,
-                rounding: DVec3::select(lit, rounding * frame.out, DVec3::ZERO),
-            });
+        // The point is an `f32` value, so exactly scaled.
+        let p = (point * frame.scale).as_vec3().to_array();
+        let (sum, envelope) = self.narrow.sum(p, normal.as_vec3().to_array());
+        let rounding = DVec3::splat(envelope * (1.002 * U32)) + self.lit * 2f64.powi(-126);
+        PackedSum {
+            value: DVec3::from_array(sum) * frame.out,
+            rounding: DVec3::select(
+                self.lit.cmpgt(DVec3::ZERO),
+                rounding * frame.out,
+                DVec3::ZERO,
+            ),
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use glam::{DVec3, Vec3};
-    use proptest::prelude::*;
-
-    use super::*;
-    use crate::{LightTree, PointLight};
-
-    /// A tree over `count` lights clustered in a few blobs above the plane
-    /// `z = 0`, about `origin`.
-    fn tree(seed: u64, count: usize, origin: Vec3, size: f32) -> LightTree {
-        let mut state = seed | 1;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
-        let centres: Vec<Vec3> = (0..4)
-            .map(|_| Vec3::new(next() - 0.5, next() - 0.5, 0.2 * next()) * size)
-            .collect();
-        let lights: Vec<PointLight> = (0..count)
-            .map(|i| {
-                let c = centres[i % centres.len()];
-                let spread = Vec3::new(next() - 0.5, next() - 0.5, next()) * (0.3 * size);
-                let colour = Vec3::new(next(), next() * 1e-3, 1e3 * next() * next());
-                PointLight::new(origin + c + spread + Vec3::Z * (0.05 * size), colour)
-            })
-            .collect();
-        LightTree::build(&lights).unwrap()
-    }
-
-    /// Packs a cut of `tree` for `points` (each node whose centroid lies
-    /// farther from every point than `clearance` times its radius, else its
-    /// children or lights) twice, in `f32` and in `f64`, and returns both
-    /// sums at every point.
-    fn both_sums(
-        tree: &LightTree,
-        points: &[(DVec3, DVec3)],
-        clearance: f64,
-        kd: DVec3,
-    ) -> (Vec<PackedSum>, Vec<PackedSum>) {
-        let centre = points.iter().map(|p| p.0).sum::<DVec3>() / points.len() as f64;
-        let nearest = |c: DVec3| {
-            points
-                .iter()
-                .map(|p| (c - p.0).length())
-                .fold(f64::INFINITY, f64::min)
-        };
-        let mut cut = Vec::new();
-        let mut lights = Vec::new();
-        let mut stack = vec![0usize];
-        let mut spread = Spread::default();
-        while let Some(i) = stack.pop() {
-            let node = &tree.nodes[i];
-            let c = node.centroid.as_dvec3();
-            if nearest(c) > clearance * f64::from(node.radius) && node.radius > 0.0 {
-                spread.note(nearest(c) * 0.999, (c - centre).length());
-                cut.push(i);
-            } else if node.is_leaf() {
-                for k in node.lights() {
-                    let l = tree.lights[k];
-                    let at = l.position.as_dvec3();
-                    spread.note(nearest(at) * 0.999, (at - centre).length());
-                    lights.push((l.position, l.intensity.as_dvec3() * kd));
-                }
-            } else {
-                stack.extend(node.children());
-            }
-        }
-        let root = &tree.nodes[0];
-        let extent = points
-            .iter()
-            .map(|p| p.0.abs().max_element())
-            .fold(0.0, f64::max)
-            .max(f64::from(
-                root.aabb.min.abs().max(root.aabb.max.abs()).max_element(),
-            ));
-        let limits = Limits {
-            brightest: (root.intensity * kd).max_element(),
-            extent,
-        };
-        let mut sums = [Vec::new(), Vec::new()];
-        for (narrow, sums) in [true, false].into_iter().zip(&mut sums) {
-            let mut packed = Packed::default();
-            // A coarse error packs in `f32`, an error of 0 in `f64`.
-            let error = DVec3::splat(if narrow { 1.0 } else { 0.0 });
-            packed.start(error, DVec3::ONE, spread, limits);
-            assert_eq!(packed.frame.is_some(), narrow);
-            for &i in &cut {
-                packed.push_node(&tree.nodes[i], kd);
-            }
-            for &(position, intensity) in &lights {
-                packed.push_light(position, intensity);
-            }
-            packed.sums(points, sums);
-        }
-        let [narrow, wide] = sums;
-        (narrow, wide)
-    }
-
-    proptest! {
-        /// The `f32` sums lie within their stated rounding of the `f64`
-        /// sums (whose own rounding is some `2^-40` of that), on groups of
-        /// tilted points far from the origin, for cuts whose nodes come as
-        /// near as 1.05 radii (large moment terms) and lights as near as
-        /// the lights are.
-        #[test]
-        fn narrow_sums_keep_within_their_rounding(
-            seed in 1u64..u64::MAX,
-            count in 1usize..400,
-            far in prop_oneof![Just(0.0f32), 1e3f32..1e6],
-            size in 0.5f32..500.0,
-            clearance in prop_oneof![Just(1.05f64), 1.05f64..20.0],
-            tilts in proptest::collection::vec((-1.0f32..1.0, -1.0f32..1.0, 0.05f32..1.0), 1..40),
-            spots in proptest::collection::vec((-0.5f32..0.5, -0.5f32..0.5, -0.02f32..0.0), 40),
-        ) {
-            let origin = Vec3::new(far, -0.5 * far, 0.0);
-            let tree = tree(seed, count, origin, size);
-            let points: Vec<(DVec3, DVec3)> = tilts
-                .iter()
-                .zip(&spots)
-                .map(|(&(x, y, z), &(a, b, c))| {
-                    let p = origin + Vec3::new(a, b, c) * size;
-                    (p.as_dvec3(), Vec3::new(x, y, z).normalize().as_dvec3())
-                })
-                .collect();
-            let kd = DVec3::new(0.9, 0.5, 0.2);
-            let (narrow, wide) = both_sums(&tree, &points, clearance, kd);
-            for (n, w) in narrow.iter().zip(&wide) {
-                prop_assert_eq!(w.rounding, DVec3::ZERO);
-                let miss = (n.value - w.value).abs();
-                prop_assert!(
-                    miss.cmple(n.rounding).all(),
-                    "f32 {} f64 {} rounding {}",
-                    n.value,
-                    w.value,
-                    n.rounding
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn a_cut_too_fine_for_f32_is_packed_in_f64() {
-        let spread = Spread {
-            nearest: 1.0,
-            farthest: 10.0,
-        };
-        let limits = Limits {
-            brightest: 1.0,
-            extent: 10.0,
-        };
-        let mut packed = Packed::default();
-        packed.start(DVec3::splat(1e-6), DVec3::ONE, spread, limits);
-        assert!(packed.frame.is_none());
-        packed.start(DVec3::splat(1e-3), DVec3::ONE, spread, limits);
-        assert!(packed.frame.is_some());
-        // Distances beyond the frame's reach.
-        let far = Spread {
-            nearest: 1e-13,
-            farthest: 1.0,
-        };
-        packed.start(DVec3::splat(1e-3), DVec3::ONE, far, limits);
-        assert!(packed.frame.is_none());
-        // No entry noted (nearest distance infinite).
-        packed.start(DVec3::splat(1e-3), DVec3::ONE, Spread::default(), limits);
-        assert!(packed.frame.is_none());
     }
 }
