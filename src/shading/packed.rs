@@ -672,3 +672,174 @@ impl Packed {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use glam::{DVec3, Vec3};
+    use proptest::prelude::*;
+
+    use super::*;
+    use crate::{LightTree, PointLight};
+
+    /// A tree over `count` lights clustered in a few blobs above the plane
+    /// `z = 0`, about `origin`.
+    fn tree(seed: u64, count: usize, origin: Vec3, size: f32) -> LightTree {
+        let mut state = seed | 1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let centres: Vec<Vec3> = (0..4)
+            .map(|_| Vec3::new(next() - 0.5, next() - 0.5, 0.2 * next()) * size)
+            .collect();
+        let lights: Vec<PointLight> = (0..count)
+            .map(|i| {
+                let c = centres[i % centres.len()];
+                let spread = Vec3::new(next() - 0.5, next() - 0.5, next()) * (0.3 * size);
+                let colour = Vec3::new(next(), next() * 1e-3, 1e3 * next() * next());
+                PointLight::new(origin + c + spread + Vec3::Z * (0.05 * size), colour)
+            })
+            .collect();
+        LightTree::build(&lights).unwrap()
+    }
+
+    /// Packs a cut of `tree` for `points` (each node whose centroid lies
+    /// farther from every point than `clearance` times its radius, else its
+    /// children or lights) twice, in `f32` and in `f64`, and returns both
+    /// sums at every point.
+    fn both_sums(
+        tree: &LightTree,
+        points: &[(DVec3, DVec3)],
+        clearance: f64,
+        kd: DVec3,
+    ) -> (Vec<PackedSum>, Vec<PackedSum>) {
+        let centre = points.iter().map(|p| p.0).sum::<DVec3>() / points.len() as f64;
+        let nearest = |c: DVec3| {
+            points
+                .iter()
+                .map(|p| (c - p.0).length())
+                .fold(f64::INFINITY, f64::min)
+        };
+        let mut cut = Vec::new();
+        let mut lights = Vec::new();
+        let mut stack = vec![0usize];
+        let mut spread = Spread::default();
+        while let Some(i) = stack.pop() {
+            let node = &tree.nodes[i];
+            let c = node.centroid.as_dvec3();
+            if nearest(c) > clearance * f64::from(node.radius) && node.radius > 0.0 {
+                spread.note(nearest(c) * 0.999, (c - centre).length());
+                cut.push(i);
+            } else if node.is_leaf() {
+                for k in node.lights() {
+                    let l = tree.lights[k];
+                    let at = l.position.as_dvec3();
+                    spread.note(nearest(at) * 0.999, (at - centre).length());
+                    lights.push((l.position, l.intensity.as_dvec3() * kd));
+                }
+            } else {
+                stack.extend(node.children());
+            }
+        }
+        let root = &tree.nodes[0];
+        let extent = points
+            .iter()
+            .map(|p| p.0.abs().max_element())
+            .fold(0.0, f64::max)
+            .max(f64::from(
+                root.aabb.min.abs().max(root.aabb.max.abs()).max_element(),
+            ));
+        let limits = Limits {
+            brightest: (root.intensity * kd).max_element(),
+            extent,
+        };
+        let mut sums = [Vec::new(), Vec::new()];
+        for (narrow, sums) in [true, false].into_iter().zip(&mut sums) {
+            let mut packed = Packed::default();
+            // A coarse error packs in `f32`, an error of 0 in `f64`.
+            let error = DVec3::splat(if narrow { 1.0 } else { 0.0 });
+            packed.start(error, DVec3::ONE, spread, limits);
+            assert_eq!(packed.frame.is_some(), narrow);
+            for &i in &cut {
+                packed.push_node(&tree.nodes[i], kd);
+            }
+            for &(position, intensity) in &lights {
+                packed.push_light(position, intensity);
+            }
+            sums.extend(points.iter().map(|&(p, n)| packed.sum(p, n)));
+        }
+        let [narrow, wide] = sums;
+        (narrow, wide)
+    }
+
+    proptest! {
+        /// The `f32` sums lie within their stated rounding of the `f64`
+        /// sums (whose own rounding is some `2^-40` of that), on groups of
+        /// tilted points far from the origin, for cuts whose nodes come as
+        /// near as 1.05 radii (large moment terms) and lights as near as
+        /// the lights are.
+        #[test]
+        fn narrow_sums_keep_within_their_rounding(
+            seed in 1u64..u64::MAX,
+            count in 1usize..400,
+            far in prop_oneof![Just(0.0f32), 1e3f32..1e6],
+            size in 0.5f32..500.0,
+            clearance in prop_oneof![Just(1.05f64), 1.05f64..20.0],
+            tilts in proptest::collection::vec((-1.0f32..1.0, -1.0f32..1.0, 0.05f32..1.0), 1..40),
+            spots in proptest::collection::vec((-0.5f32..0.5, -0.5f32..0.5, -0.02f32..0.0), 40),
+        ) {
+            let origin = Vec3::new(far, -0.5 * far, 0.0);
+            let tree = tree(seed, count, origin, size);
+            let points: Vec<(DVec3, DVec3)> = tilts
+                .iter()
+                .zip(&spots)
+                .map(|(&(x, y, z), &(a, b, c))| {
+                    let p = origin + Vec3::new(a, b, c) * size;
+                    (p.as_dvec3(), Vec3::new(x, y, z).normalize().as_dvec3())
+                })
+                .collect();
+            let kd = DVec3::new(0.9, 0.5, 0.2);
+            let (narrow, wide) = both_sums(&tree, &points, clearance, kd);
+            for (n, w) in narrow.iter().zip(&wide) {
+                prop_assert_eq!(w.rounding, DVec3::ZERO);
+                let miss = (n.value - w.value).abs();
+                prop_assert!(
+                    miss.cmple(n.rounding).all(),
+                    "f32 {} f64 {} rounding {}",
+                    n.value,
+                    w.value,
+                    n.rounding
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_cut_too_fine_for_f32_is_packed_in_f64() {
+        let spread = Spread {
+            nearest: 1.0,
+            farthest: 10.0,
+        };
+        let limits = Limits {
+            brightest: 1.0,
+            extent: 10.0,
+        };
+        let mut packed = Packed::default();
+        packed.start(DVec3::splat(1e-6), DVec3::ONE, spread, limits);
+        assert!(packed.frame.is_none());
+        packed.start(DVec3::splat(1e-3), DVec3::ONE, spread, limits);
+        assert!(packed.frame.is_some());
+        // Distances beyond the frame's reach.
+        let far = Spread {
+            nearest: 1e-13,
+            farthest: 1.0,
+        };
+        packed.start(DVec3::splat(1e-3), DVec3::ONE, far, limits);
+        assert!(packed.frame.is_none());
+        // No entry noted (nearest distance infinite).
+        packed.start(DVec3::splat(1e-3), DVec3::ONE, Spread::default(), limits);
+        assert!(packed.frame.is_none());
+    }
+}
