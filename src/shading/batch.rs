@@ -1725,11 +1725,13 @@ impl<S: Shader> Shading<'_, S> {
             Limits {
                 brightest: 0.0,
                 extent: 0.0,
+                radius: cut.group.radius,
             },
             |root| Limits {
                 brightest: (root.intensity * kd).max_element(),
                 extent: f64::from(root.aabb.min.abs().max(root.aabb.max.abs()).max_element())
                     .max(cut.group.centre.abs().max_element() + cut.group.radius),
+                radius: cut.group.radius,
             },
         );
         let mut margin = FIRST_MARGIN;

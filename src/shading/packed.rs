@@ -2,12 +2,12 @@
 //! points in independent lanes that the compiler vectorizes; on `x86_64`
 //! the widest vectors the processor has are picked at run time.
 //!
-//! The estimates are always packed in `f64` ([`WIDE`] lanes). When the
-//! cut's certified error is coarse enough (at least [`NARROW_PRECISION`] of
-//! the radiance it steers by) and every value fits, they are also packed
-//! in `f32` ([`NARROW`] lanes, twice as many a vector), in a frame scaled by
-//! powers of two, and the points sum those, each with a certified bound on
-//! its own rounding that its result's bound takes in.
+//! The estimates are packed in `f64` ([`WIDE`] lanes), or, when the cut's
+//! certified error is coarse enough (at least [`NARROW_PRECISION`] of the
+//! radiance it steers by) and every value fits, in `f32` ([`NARROW`] lanes,
+//! twice as many a vector) in a frame scaled by powers of two; then each
+//! point also sums a certified bound on its own rounding, which its
+//! result's bound takes in.
 //!
 //! # The rounding of the `f32` sum
 //!
@@ -452,8 +452,10 @@ fn up(x: f64) -> f32 {
 /// when some value would fall outside its range.
 fn narrow_frame(spread: Spread, limits: Limits) -> Option<Frame> {
     let positive = |x: f64| x > 0.0 && x.is_finite();
+    // Every distance from a point to an entry is at most `farthest +
+    // radius`.
     if !(positive(spread.nearest)
-        && spread.farthest <= MAX_REACH * spread.nearest
+        && spread.farthest + limits.radius <= MAX_REACH * spread.nearest
         && positive(limits.brightest))
     {
         return None;
@@ -485,12 +487,14 @@ pub(crate) struct PackedSum {
 }
 
 /// What every entry of a cut lies within: intensities (times `kd`, any
-/// channel) at most `brightest`, coordinates at most `extent` in
-/// magnitude (the tree's root bounds both).
+/// channel) at most `brightest`, coordinates (and the points') at most
+/// `extent` in magnitude (the tree's root and the group's ball bound
+/// them); the points lie within `radius` of the group's centre.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Limits {
     pub(crate) brightest: f64,
     pub(crate) extent: f64,
+    pub(crate) radius: f64,
 }
 
 /// The entries of a shared cut whose estimate is the degree-2 series
@@ -751,9 +755,14 @@ mod tests {
             .max(f64::from(
                 root.aabb.min.abs().max(root.aabb.max.abs()).max_element(),
             ));
+        let radius = points
+            .iter()
+            .map(|p| (p.0 - centre).length())
+            .fold(0.0, f64::max);
         let limits = Limits {
             brightest: (root.intensity * kd).max_element(),
             extent,
+            radius,
         };
         let mut sums = [Vec::new(), Vec::new()];
         for (narrow, sums) in [true, false].into_iter().zip(&mut sums) {
@@ -825,6 +834,7 @@ mod tests {
         let limits = Limits {
             brightest: 1.0,
             extent: 10.0,
+            radius: 1.0,
         };
         let mut packed = Packed::default();
         packed.start(DVec3::splat(1e-6), DVec3::ONE, spread, limits);
@@ -837,6 +847,13 @@ mod tests {
             farthest: 1.0,
         };
         packed.start(DVec3::splat(1e-3), DVec3::ONE, far, limits);
+        assert!(packed.frame.is_none());
+        // A group far wider than its nearest entry is near.
+        let wide = Limits {
+            radius: 1e13,
+            ..limits
+        };
+        packed.start(DVec3::splat(1e-3), DVec3::ONE, spread, wide);
         assert!(packed.frame.is_none());
         // No entry noted (nearest distance infinite).
         packed.start(DVec3::splat(1e-3), DVec3::ONE, Spread::default(), limits);
