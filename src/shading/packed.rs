@@ -479,7 +479,10 @@ fn narrow_frame(spread: Spread, limits: Limits) -> Option<Frame> {
     (limits.extent.max(spread.farthest) * frame.scale <= MAX_COORDINATE).then_some(frame)
 }
 
-/// One point's packed sum and the bound on its rounding.
+/// One point's packed sum and the bound on its rounding: per channel,
+/// `|value - S| <= rounding`, with `S` the entries' estimates summed in
+/// exact arithmetic at the point (0 for a sum in `f64` lanes, whose
+/// rounding the cut's bound covers; see the module's docs).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct PackedSum {
     pub(crate) value: DVec3,
@@ -665,7 +668,9 @@ impl Packed {
         // The point is an `f32` value, so exactly scaled.
         let p = (point * frame.scale).as_vec3().to_array();
         let (sum, envelope) = self.narrow.sum(p, normal.as_vec3().to_array());
-        let rounding = DVec3::splat(envelope * (1.002 * U32)) + self.lit * 2f64.powi(-126);
+        // `2^-126` per lit entry for what underflows.
+        let underflow = self.lit * f64::from(f32::MIN_POSITIVE);
+        let rounding = DVec3::splat(envelope * (1.002 * U32)) + underflow;
         PackedSum {
             value: DVec3::from_array(sum) * frame.out,
             rounding: DVec3::select(
@@ -688,13 +693,8 @@ mod tests {
     /// A tree over `count` lights clustered in a few blobs above the plane
     /// `z = 0`, about `origin`.
     fn tree(seed: u64, count: usize, origin: Vec3, size: f32) -> LightTree {
-        let mut state = seed | 1;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut state = seed;
+        let mut next = move || crate::testing::uniform(&mut state);
         let centres: Vec<Vec3> = (0..4)
             .map(|_| Vec3::new(next() - 0.5, next() - 0.5, 0.2 * next()) * size)
             .collect();
