@@ -71,6 +71,11 @@ pub const QUICK_BATCH: BatchSizes = BatchSizes {
     lights: 100_000,
     runs: 3,
 };
+/// Rounds of the threads' timing, per timed run of the other
+/// configurations: a round takes about 0.1 s, and its ratio is the one
+/// figure here that needs both cores undisturbed at once, so more rounds
+/// steady the median on a shared machine.
+const THREAD_ROUNDS_PER_RUN: usize = 3;
 /// The image.
 const WIDTH: u32 = 320;
 const HEIGHT: u32 = 180;
@@ -404,8 +409,9 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
     let mut parallel_results = results.clone();
     let mut parallel_stats = Ok(BatchStats::default());
     let pool = tree.shading(shader);
+    let thread_rounds = runs * THREAD_ROUNDS_PER_RUN;
     let threads = paired(
-        runs,
+        thread_rounds,
         (queries.len(), queries.len()),
         || {
             parallel_stats = pool.shade_batch_parallel(
@@ -427,7 +433,7 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
     // What the machine's threads give a loop with no shared work at all:
     // the SIMD exact sum over the sampled pixels, the same way.
     let exact_threads = paired(
-        runs,
+        thread_rounds,
         (samples.len(), samples.len()),
         || {
             samples.par_iter().for_each(|&k| {
@@ -438,7 +444,7 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
     );
     println!(
         "  {} threads (shade_batch_parallel, feature `rayon`) at 1%: {:.2} us per pixel, {:.2}x \
-         one thread (median of {runs} alternating rounds' ratios), the same bits; the SIMD exact \
+         one thread (median of {thread_rounds} alternating rounds' ratios), the same bits; the SIMD exact \
          sum over the sampled pixels on the same threads: {:.2}x one thread\n",
         rayon::current_num_threads(),
         threads.us,

@@ -8,6 +8,7 @@ use glam::{DVec3, Vec3};
 
 use super::blend;
 use super::error_list::{Class, Entry, ErrorList, Seen};
+use super::grouping::{GROUP_NORMAL_SPREAD, Groups, groups, points_box};
 use super::packed::{Limits, Packed, Spread};
 use super::refine::{region, reported_bound};
 use super::{Accepts, Query, ShadeResult, Shading, Stop, Target, Threshold};
@@ -19,7 +20,7 @@ use crate::numeric::{
     CompensatedSum, DISTANCE_SLACK, POINT_SLACK, SECOND_ORDER_SLACK, SERIES_SLACK,
 };
 use crate::shader::Shader;
-use crate::tree::{LightTree, MAX_CHILDREN, Node, morton};
+use crate::tree::{LightTree, MAX_CHILDREN, Node};
 use crate::visibility::{Coverage, NodeRegion, PointGroup, Visibility};
 
 /// What a batch call did.
@@ -52,8 +53,6 @@ impl core::ops::AddAssign for BatchStats {
     }
 }
 
-/// Most points in a group.
-const GROUP_POINTS: usize = 128;
 /// With interpolation, a group's cut also serves the points of other groups
 /// within this share of the largest side of its points' box (its halo), and
 /// each point blends the results of its own group and of the groups whose
@@ -71,9 +70,6 @@ const HALO_SHARE: f64 = 0.25;
 /// Fewest points worth a shared cut: smaller groups are shaded point by
 /// point.
 const GROUP_MIN_POINTS: usize = 4;
-/// A point joins the group being formed only if its normal is within this
-/// distance (`|n - n_first|`, about 29 degrees) of the group's first normal.
-const GROUP_NORMAL_SPREAD: f64 = 0.5;
 /// What a group's shared cut may cost, per point, before the group is
 /// shaded point by point: this share of what a point shaded on its own
 /// costs (node bounds, single lights and host queries), as measured on the
@@ -939,143 +935,6 @@ fn packed_bound(error: DVec3, entries: usize) -> DVec3 {
     reported_bound(error) * (1.0 + lane_terms * f64::EPSILON)
 }
 
-/// Morton codes of points over a bounding cube.
-struct MortonFrame {
-    min: DVec3,
-    scale: f64,
-    top: DVec3,
-}
-
-impl MortonFrame {
-    /// The frame of the cube at `min` whose side is the box's largest.
-    fn new(min: DVec3, max: DVec3) -> Self {
-        let extent = (max - min).max_element();
-        let cells = f64::from(1u32 << morton::BITS_PER_AXIS);
-        Self {
-            min,
-            scale: if extent > 0.0 { cells / extent } else { 0.0 },
-            top: DVec3::splat(cells - 1.0),
-        }
-    }
-
-    fn code(&self, point: DVec3) -> u64 {
-        let c = ((point - self.min) * self.scale).clamp(DVec3::ZERO, self.top);
-        morton::spread(c.x as u32)
-            | morton::spread(c.y as u32) << 1
-            | morton::spread(c.z as u32) << 2
-    }
-}
-
-/// Indices of `queries` in Morton order of their points over the batch's
-/// bounding cube (equal codes in the queries' order), and their codes in
-/// that order.
-fn morton_order<M>(queries: &[Query<M>]) -> (Vec<u32>, Vec<u64>) {
-    let mut min = DVec3::INFINITY;
-    let mut max = DVec3::NEG_INFINITY;
-    for q in queries {
-        min = min.min(q.surface().point);
-        max = max.max(q.surface().point);
-    }
-    let frame = MortonFrame::new(min, max);
-    let codes: Vec<u64> = queries
-        .iter()
-        .map(|q| frame.code(q.surface().point))
-        .collect();
-    let order = morton::sort(&codes);
-    let sorted = order.iter().map(|&i| codes[i as usize]).collect();
-    (order, sorted)
-}
-
-/// [`morton_order`] over rayon's thread pool: the same order (a sort by
-/// code and index is the stable sort by code).
-#[cfg(feature = "rayon")]
-fn morton_order_parallel<M: Sync>(queries: &[Query<M>]) -> (Vec<u32>, Vec<u64>) {
-    use rayon::prelude::*;
-
-    let corners = |q: &Query<M>| (q.surface().point, q.surface().point);
-    let (min, max) = queries.par_iter().map(corners).reduce(
-        || (DVec3::INFINITY, DVec3::NEG_INFINITY),
-        |a, b| (a.0.min(b.0), a.1.max(b.1)),
-    );
-    let frame = MortonFrame::new(min, max);
-    let mut keyed: Vec<(u64, u32)> = queries
-        .par_iter()
-        .enumerate()
-        .map(|(i, q)| (frame.code(q.surface().point), i as u32))
-        .collect();
-    keyed.par_sort_unstable();
-    keyed.into_par_iter().map(|(code, i)| (i, code)).unzip()
-}
-
-/// The groups: ranges of `order` (whose Morton codes are `codes`, sorted)
-/// that are the cells of the Morton quadtree (octree) over the points
-/// holding at most [`GROUP_POINTS`] points, each cut further into runs
-/// whose normals lie within [`GROUP_NORMAL_SPREAD`] of the run's first.
-/// A cell is compact, as a run of the curve need not be: where the curve
-/// jumps between far cells, a run takes in both sides, and its cut must
-/// serve the whole span. At 10^6 lights, certified 1%, cells of at most 64
-/// points took about 15% less time than runs of 64, and cells of at most
-/// 128 about 8% less again (256 and 512: no further gain).
-fn group_runs<M>(queries: &[Query<M>], order: &[u32], codes: &[u64]) -> Vec<Range<usize>> {
-    let mut cells = Vec::new();
-    morton_cells(codes, 0..order.len(), &mut cells);
-    let mut runs = Vec::with_capacity(cells.len());
-    for cell in cells {
-        let mut start = cell.start;
-        while start < cell.end {
-            let first = queries[order[start] as usize].surface().normal;
-            let mut end = start + 1;
-            while end < cell.end
-                && (queries[order[end] as usize].surface().normal - first).length()
-                    <= GROUP_NORMAL_SPREAD
-            {
-                end += 1;
-            }
-            runs.push(start..end);
-            start = end;
-        }
-    }
-    runs
-}
-
-/// Appends to `cells` the cells of the Morton tree over the sorted `codes`
-/// in `range` holding at most [`GROUP_POINTS`] codes each, in order: a
-/// range too large is split where the highest bit in which its first and
-/// last codes differ turns on. Points with equal codes (beyond the curve's
-/// resolution) are cut into consecutive runs.
-fn morton_cells(codes: &[u64], range: Range<usize>, cells: &mut Vec<Range<usize>>) {
-    if range.len() <= GROUP_POINTS {
-        if !range.is_empty() {
-            cells.push(range);
-        }
-        return;
-    }
-    let (first, last) = (codes[range.start], codes[range.end - 1]);
-    if first == last {
-        let mut start = range.start;
-        while start < range.end {
-            let end = (start + GROUP_POINTS).min(range.end);
-            cells.push(start..end);
-            start = end;
-        }
-        return;
-    }
-    let bit = 1u64 << (63 - (first ^ last).leading_zeros());
-    let mid = range.start + codes[range.clone()].partition_point(|c| c & bit == 0);
-    morton_cells(codes, range.start..mid, cells);
-    morton_cells(codes, mid..range.end, cells);
-}
-
-/// The bounding box of the points of `queries` at `indices`.
-fn points_box<M>(queries: &[Query<M>], indices: &[u32]) -> (DVec3, DVec3) {
-    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-    for &i in indices {
-        let p = queries[i as usize].surface().point;
-        (lo, hi) = (lo.min(p), hi.max(p));
-    }
-    (lo, hi)
-}
-
 /// Each group's halo when `threshold` interpolates (none otherwise, and
 /// none for Lightcuts' per-node target): the points of other groups whose
 /// distance to the group's points' box is less than the halo width,
@@ -1307,8 +1166,7 @@ impl<S: Shader> Shading<'_, S> {
             stats.points_alone = queries.len() as u32;
             return Ok(stats);
         }
-        let (order, codes) = morton_order(queries);
-        let runs = group_runs(queries, &order, &codes);
+        let Groups { order, runs } = groups(queries);
         let halos = halos(queries, &order, &runs, &threshold);
         let mut out = Outcome::default();
         for (k, chunk) in runs.chunks(CHUNK_RUNS).enumerate() {
@@ -1373,8 +1231,11 @@ impl<S: Shader> Shading<'_, S> {
                 ..BatchStats::default()
             });
         }
-        let (order, codes) = morton_order_parallel(queries);
-        let runs = group_runs(queries, &order, &codes);
+        // The grouping is serial: on two threads, computing the codes and
+        // sorting halves of the batch on both took longer (2.1-2.8 ms
+        // against 1.3-1.6 for 57,600 points, one core idle either way),
+        // the threads' wake-ups costing more than the work they share.
+        let Groups { order, runs } = groups(queries);
         // Each query's place in `order`; the chunks write their results in
         // that order, into disjoint slices, and the results are gathered
         // from there.
@@ -1404,7 +1265,7 @@ impl<S: Shader> Shading<'_, S> {
         // against 1.67x and 1.64x in Morton order, the exact sum's own
         // 1.97-2.00x in the same runs).
         let mut queue: Vec<(f64, usize)> = chunks
-            .par_iter()
+            .iter()
             .enumerate()
             .map(|(k, chunk)| {
                 let places = chunk[0].start..chunk[chunk.len() - 1].end;
@@ -1881,79 +1742,5 @@ impl<S: Shader> Shading<'_, S> {
         let packed = scratch.packed.sum(surface.point, surface.normal);
         sum.add(packed.value);
         (sum.value().max(DVec3::ZERO), rays, packed.rounding)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Sorted pseudo-random codes, clustered (few distinct high bits) with
-    /// runs of equal codes.
-    fn codes(n: usize, seed: u64) -> Vec<u64> {
-        let mut state = seed;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            state >> 1
-        };
-        let mut codes: Vec<u64> = (0..n)
-            .map(|_| {
-                let r = next();
-                match r % 4 {
-                    0 => r & 0xff,
-                    1 => 42,
-                    _ => r,
-                }
-            })
-            .collect();
-        codes.sort_unstable();
-        codes
-    }
-
-    #[cfg(feature = "rayon")]
-    #[test]
-    fn both_morton_orders_agree_also_on_equal_codes() {
-        // Points on a small grid, each repeated: many equal codes, whose
-        // order is the queries' order in both.
-        let queries: Vec<Query> = (0..5000)
-            .map(|k| {
-                let p = glam::Vec3::new((k % 7) as f32, ((k / 7) % 5) as f32, 0.5);
-                Query::new(p, glam::Vec3::Z).expect("finite")
-            })
-            .collect();
-        assert_eq!(morton_order(&queries), morton_order_parallel(&queries));
-    }
-
-    #[test]
-    fn morton_cells_are_whole_cells_of_at_most_a_group() {
-        for (n, seed) in [(0, 1), (1, 2), (128, 3), (129, 4), (5000, 5), (20_000, 6)] {
-            let codes = codes(n, seed);
-            let mut cells = Vec::new();
-            morton_cells(&codes, 0..n, &mut cells);
-            // In order, covering every code once.
-            let mut at = 0;
-            for cell in &cells {
-                assert_eq!(cell.start, at);
-                assert!(!cell.is_empty() && cell.len() <= GROUP_POINTS);
-                at = cell.end;
-            }
-            assert_eq!(at, n);
-            for cell in &cells {
-                let (first, last) = (codes[cell.start], codes[cell.end - 1]);
-                if first == last {
-                    continue;
-                }
-                // Some aligned cell of the Morton tree holds exactly these
-                // codes: the codes sharing `first`'s bits above some level.
-                let lowest = 64 - (first ^ last).leading_zeros();
-                let whole = (lowest..64).any(|bits| {
-                    let inside = codes.iter().filter(|&&c| c >> bits == first >> bits);
-                    inside.count() == cell.len()
-                });
-                assert!(whole, "{cell:?} of {n}");
-            }
-        }
     }
 }

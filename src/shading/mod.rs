@@ -6,6 +6,7 @@ mod batch;
 mod blend;
 mod error_list;
 mod exact;
+mod grouping;
 mod packed;
 mod query;
 mod refine;
