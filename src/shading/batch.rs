@@ -3,6 +3,10 @@
 //! normal.
 
 use core::ops::Range;
+#[cfg(feature = "rayon")]
+use core::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+#[cfg(feature = "rayon")]
+use std::sync::{Mutex, OnceLock};
 
 use glam::{DVec3, Vec3};
 
@@ -122,7 +126,44 @@ type Halo = Vec<(u32, f64)>;
 /// A chunk's results, in Morton order from its first place, for the worker
 /// that takes it.
 #[cfg(feature = "rayon")]
-type Slot<'a> = std::sync::Mutex<Option<(usize, &'a mut [ShadeResult])>>;
+type Slot<'a> = Mutex<Option<(usize, &'a mut [ShadeResult])>>;
+
+/// Sets its flag when dropped.
+#[cfg(feature = "rayon")]
+struct Leaving<'a>(&'a AtomicBool);
+
+#[cfg(feature = "rayon")]
+impl Drop for Leaving<'_> {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Release);
+    }
+}
+
+/// What the workers of a parallel call share once the groups are formed.
+#[cfg(feature = "rayon")]
+struct Setup<'a> {
+    /// The queries in Morton order.
+    order: Vec<u32>,
+    /// The groups, ranges of `order`.
+    runs: Vec<Range<usize>>,
+    /// Each query's place in `order`.
+    place: Vec<u32>,
+    /// Each group's halo.
+    halos: Vec<Halo>,
+    /// The chunks in the order the workers take them, by index.
+    queue: Vec<(f64, usize)>,
+    /// Each chunk's results.
+    slots: Vec<Slot<'a>>,
+}
+
+#[cfg(feature = "rayon")]
+impl Setup<'_> {
+    /// The groups of chunk `k`.
+    fn chunk(&self, k: usize) -> &[Range<usize>] {
+        let start = k * CHUNK_RUNS;
+        &self.runs[start..(start + CHUNK_RUNS).min(self.runs.len())]
+    }
+}
 
 /// A group's result for a point of its halo, with its blend weight.
 #[derive(Clone, Copy, Debug)]
@@ -1179,15 +1220,16 @@ impl<S: Shader> Shading<'_, S> {
     }
 
     /// [`shade_batch`](Self::shade_batch) spread over rayon's thread pool:
-    /// the same groups are formed and shaded in chunks, each chunk on some
-    /// thread with a session of its own (the shader and the visibility host
-    /// cloned), so the results are the same bits as `shade_batch`'s.
-    /// Without shared cuts, chunks of the batch are shaded point by point on
-    /// the threads.
+    /// the same groups are formed (on the calling thread, while the pool's
+    /// threads wake up and wait for them) and shaded in chunks, each chunk
+    /// on some thread with a session of its own (the shader and the
+    /// visibility host cloned), so the results are the same bits as
+    /// `shade_batch`'s. Without shared cuts, chunks of the batch are shaded
+    /// point by point on the threads.
     ///
     /// Allocation: besides what `shade_batch` allocates, a result and an
     /// index per query (the threads write their results in Morton order,
-    /// gathered into `results` at the end), and a session per rayon job.
+    /// gathered into `results` at the end), and a session per thread.
     ///
     /// # Errors
     /// As [`shade_batch`](Self::shade_batch).
@@ -1231,88 +1273,129 @@ impl<S: Shader> Shading<'_, S> {
                 ..BatchStats::default()
             });
         }
-        // The grouping is serial: on two threads, computing the codes and
-        // sorting halves of the batch on both took longer (2.1-2.8 ms
-        // against 1.3-1.6 for 57,600 points, one core idle either way),
-        // the threads' wake-ups costing more than the work they share.
-        let Groups { order, runs } = groups(queries);
-        // Each query's place in `order`; the chunks write their results in
-        // that order, into disjoint slices, and the results are gathered
-        // from there.
-        let mut place = vec![0u32; queries.len()];
-        for (k, &i) in order.iter().enumerate() {
-            place[i as usize] = k as u32;
-        }
+        // The calling thread forms the groups while the pool's other threads
+        // wake up and wait for them: a sleeping thread can take milliseconds
+        // to wake on a shared machine, about as long as the grouping, and
+        // woken only once the groups were formed one often started 1-4 ms
+        // after the other (of 30-40 ms). Grouping on the threads instead
+        // (codes, and halves of the sort) took longer than on one: 2.1-2.8
+        // ms against 1.3-1.6 for 57,600 points.
         let mut ordered = vec![ShadeResult::EMPTY; queries.len()];
-        let chunks: Vec<&[Range<usize>]> = runs.chunks(CHUNK_RUNS).collect();
-        let mut slices = Vec::with_capacity(chunks.len());
-        let mut rest = ordered.as_mut_slice();
-        for chunk in &chunks {
-            let (first, last) = (&chunk[0], &chunk[chunk.len() - 1]);
-            let (slice, tail) = rest.split_at_mut(last.end - first.start);
-            slices.push((first.start, slice));
-            rest = tail;
-        }
-        let halos = halos(queries, &order, &runs, &threshold);
-        // The chunks of `shade_batch`, handed out to one worker per thread as
-        // each finishes its last; each worker shades with a session of its
-        // own, reused from chunk to chunk (a chunk's results do not depend on
-        // what the session shaded before, nor on the order). The chunks whose
-        // points spread widest go first: those are the costly ones (a group
-        // that spans blocks near the horizon is shaded point by point), and
-        // left for the end one would keep the other thread waiting (at 10^6
-        // lights, certified 1%: 1.85x and 1.88x one thread on two cores
-        // against 1.67x and 1.64x in Morton order, the exact sum's own
-        // 1.97-2.00x in the same runs).
-        let mut queue: Vec<(f64, usize)> = chunks
-            .iter()
-            .enumerate()
-            .map(|(k, chunk)| {
-                let places = chunk[0].start..chunk[chunk.len() - 1].end;
-                let (lo, hi) = points_box(queries, &order[places]);
-                (-(hi - lo).max_element(), k)
-            })
-            .collect();
-        queue.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let next = core::sync::atomic::AtomicUsize::new(0);
-        let slots: Vec<Slot<'_>> = slices
-            .into_iter()
-            .map(|slot| std::sync::Mutex::new(Some(slot)))
-            .collect();
-        let workers = rayon::current_num_threads().clamp(1, chunks.len().max(1));
-        let out = (0..workers)
-            .into_par_iter()
-            .map(|_| {
-                let mut shading = session();
-                let mut out = Outcome::default();
-                loop {
-                    let taken = next.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-                    let Some(&(_, k)) = queue.get(taken) else {
-                        break;
-                    };
-                    let slot = &slots[k];
-                    // Each index is taken once, so its slot is full and its
-                    // lock free.
-                    let taken = slot.lock().map(|mut slot| slot.take()).ok().flatten();
-                    let Some((start, results)) = taken else {
-                        continue;
-                    };
-                    shading.shade_chunk(
-                        (queries, order.as_slice()),
-                        (k * CHUNK_RUNS, chunks[k], halos.as_slice()),
-                        threshold,
-                        &mut visibility.clone(),
-                        &mut |i, r| results[place[i] as usize - start] = r,
-                        &mut out,
-                    )?;
+        let ready: OnceLock<Setup<'_>> = OnceLock::new();
+        let next = AtomicUsize::new(0);
+        let outcomes = Mutex::new(Vec::new());
+        let workers = rayon::current_num_threads().max(1);
+        // Each worker shades with a session of its own, reused from chunk
+        // to chunk (a chunk's results do not depend on what the session
+        // shaded before, nor on the order).
+        let work = |setup: &Setup<'_>| {
+            let mut shading = session();
+            let mut out = Outcome::default();
+            let result = loop {
+                let taken = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&(_, k)) = setup.queue.get(taken) else {
+                    break Ok(());
+                };
+                // Each index is taken once, so its slot is full and its
+                // lock free.
+                let slot = setup.slots[k].lock().map(|mut slot| slot.take());
+                let Some((start, results)) = slot.ok().flatten() else {
+                    continue;
+                };
+                let done = shading.shade_chunk(
+                    (queries, setup.order.as_slice()),
+                    (k * CHUNK_RUNS, setup.chunk(k), setup.halos.as_slice()),
+                    threshold,
+                    &mut visibility.clone(),
+                    &mut |i, r| results[setup.place[i] as usize - start] = r,
+                    &mut out,
+                );
+                if let Err(e) = done {
+                    break Err(e);
                 }
-                Ok(out)
-            })
-            .try_reduce(Outcome::default, |mut a, mut b| {
-                a.stats += b.stats;
-                a.halo.append(&mut b.halo);
-                Ok(a)
-            })?;
+            };
+            if let Ok(mut all) = outcomes.lock() {
+                all.push(result.map(|()| out));
+            }
+        };
+        // Set when the calling thread leaves the scope, even by a panic, so
+        // that no worker waits forever.
+        let done = AtomicBool::new(false);
+        let wait = || loop {
+            if let Some(setup) = ready.get() {
+                break Some(setup);
+            }
+            if done.load(Ordering::Acquire) {
+                break None;
+            }
+            std::thread::yield_now();
+        };
+        // In place: the groups are formed on the calling thread, and the
+        // waiting workers go to the pool at once.
+        rayon::in_place_scope(|scope| {
+            for _ in 1..workers {
+                scope.spawn(|_| {
+                    if let Some(setup) = wait() {
+                        work(setup);
+                    }
+                });
+            }
+            let _leaving = Leaving(&done);
+            let Groups { order, runs } = groups(queries);
+            let chunks: Vec<&[Range<usize>]> = runs.chunks(CHUNK_RUNS).collect();
+            // Each query's place in `order`; the chunks write their results
+            // in that order, into disjoint slices of `ordered`, and the
+            // results are gathered from there.
+            let mut place = vec![0u32; queries.len()];
+            for (k, &i) in order.iter().enumerate() {
+                place[i as usize] = k as u32;
+            }
+            let mut slots: Vec<Slot<'_>> = Vec::with_capacity(chunks.len());
+            let mut rest = ordered.as_mut_slice();
+            for chunk in &chunks {
+                let (first, last) = (&chunk[0], &chunk[chunk.len() - 1]);
+                let (slice, tail) = rest.split_at_mut(last.end - first.start);
+                slots.push(Mutex::new(Some((first.start, slice))));
+                rest = tail;
+            }
+            // The chunks whose points spread widest go first: those are the
+            // costly ones (a group that spans blocks near the horizon is
+            // shaded point by point), and left for the end one would keep
+            // the other thread waiting (at 10^6 lights, certified 1%: 1.85x
+            // and 1.88x one thread on two cores against 1.67x and 1.64x in
+            // Morton order, the exact sum's own 1.97-2.00x in the same
+            // runs).
+            let mut queue: Vec<(f64, usize)> = chunks
+                .iter()
+                .enumerate()
+                .map(|(k, chunk)| {
+                    let places = chunk[0].start..chunk[chunk.len() - 1].end;
+                    let (lo, hi) = points_box(queries, &order[places]);
+                    (-(hi - lo).max_element(), k)
+                })
+                .collect();
+            queue.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let halos = halos(queries, &order, &runs, &threshold);
+            let setup = Setup {
+                order,
+                runs,
+                place,
+                halos,
+                queue,
+                slots,
+            };
+            work(ready.get_or_init(|| setup));
+        });
+        let place = ready
+            .into_inner()
+            .map(|setup| setup.place)
+            .unwrap_or_default();
+        let mut out = Outcome::default();
+        for outcome in outcomes.into_inner().unwrap_or_default() {
+            let mut outcome = outcome?;
+            out.stats += outcome.stats;
+            out.halo.append(&mut outcome.halo);
+        }
         results
             .par_iter_mut()
             .zip(&place)
