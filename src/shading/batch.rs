@@ -1205,11 +1205,11 @@ impl<S: Shader> Shading<'_, S> {
     /// [`shade_query`](Self::shade_query) for each.
     ///
     /// Speed: on a 10^6-light street city seen from above the streets, one
-    /// core, certified 1% per pixel, the batch call took about 1.15 us per
-    /// pixel, about 1,550 times less than a vectorized exact sum and 11
+    /// core, certified 1% per pixel, the batch call took about 1.1 us per
+    /// pixel, about 1,500 times less than a vectorized exact sum and 11
     /// times less than shading each pixel on its own (`cargo run --release
-    /// -p manylights-report`, the full report and its batch part: 1570x and
-    /// 1537x).
+    /// -p manylights-report`, the full report and its batch part: 1501x and
+    /// 1508x).
     ///
     /// Rounding: where a group's cut is coarse (its certified error at
     /// least `2^-12` of the radiance it aims at), each point sums it in
