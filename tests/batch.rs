@@ -401,6 +401,41 @@ fn the_parallel_batch_gives_the_same_bits() {
     }
 }
 
+#[cfg(feature = "rayon")]
+#[test]
+fn the_parallel_batch_takes_empty_and_tiny_batches_and_checks_lengths() {
+    let (tree, queries) = street_patch();
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(0.8)));
+    let t = Threshold::relative(0.01);
+    let none: [Query; 0] = [];
+    let stats = shading
+        .shade_batch_parallel(&none, t, Unoccluded, &mut [])
+        .unwrap();
+    assert_eq!(stats, manylights::BatchStats::default());
+    for n in [1, 2, 5, 200] {
+        let mut serial = vec![placeholder(); n];
+        let mut parallel = vec![placeholder(); n];
+        let a = shading
+            .shade_batch(&queries[..n], t, Unoccluded, &mut serial)
+            .unwrap();
+        let b = shading
+            .shade_batch_parallel(&queries[..n], t, Unoccluded, &mut parallel)
+            .unwrap();
+        assert_eq!((a, &serial), (b, &parallel), "{n} points");
+        assert!(
+            parallel
+                .iter()
+                .all(|r| r.stop == manylights::Stop::ThresholdMet)
+        );
+    }
+    let mut short = vec![placeholder(); 1];
+    let error = shading.shade_batch_parallel(&queries[..2], t, Unoccluded, &mut short);
+    assert!(
+        matches!(error, Err(manylights::ShadeError::BatchLength { .. })),
+        "{error:?}"
+    );
+}
+
 #[test]
 fn a_wall_across_the_street_is_asked_once_per_group() {
     let (tree, queries) = street_patch();
