@@ -2,16 +2,17 @@
 //! batch's bounding cube, the order's cells of at most [`GROUP_POINTS`]
 //! points, each cut further where normals turn.
 //!
-//! The order is the tree's Morton sort (a stable radix sort, so equal
-//! codes keep the queries' order). The points are read once from the
-//! queries into a compact array first: the queries are larger, and reading
-//! them twice (for the box, then the codes) cost more than the sort.
+//! The codes and their order are the tree's (over the points' box; a
+//! stable radix sort, so equal codes keep the queries' order). The points
+//! are copied once from the queries, which are larger, for the two passes
+//! over them (the box, then the codes).
 
 use core::ops::Range;
 
 use glam::{DVec3, Vec3};
 
 use super::Query;
+use crate::geometry::Aabb;
 use crate::tree::morton;
 
 /// Most points in a group.
@@ -19,42 +20,6 @@ pub(super) const GROUP_POINTS: usize = 128;
 /// A point joins the group being formed only if its normal is within this
 /// distance (`|n - n_first|`, about 29 degrees) of the group's first normal.
 pub(super) const GROUP_NORMAL_SPREAD: f64 = 0.5;
-/// Morton codes of points over a bounding cube.
-struct MortonFrame {
-    min: DVec3,
-    scale: f64,
-    top: DVec3,
-}
-
-impl MortonFrame {
-    /// The frame of the cube at `min` whose side is the box's largest.
-    fn new((min, max): (DVec3, DVec3)) -> Self {
-        let extent = (max - min).max_element();
-        let cells = f64::from(1u32 << morton::BITS_PER_AXIS);
-        Self {
-            min,
-            scale: if extent > 0.0 { cells / extent } else { 0.0 },
-            top: DVec3::splat(cells - 1.0),
-        }
-    }
-
-    fn code(&self, point: DVec3) -> u64 {
-        let c = ((point - self.min) * self.scale).clamp(DVec3::ZERO, self.top);
-        morton::spread(c.x as u32)
-            | morton::spread(c.y as u32) << 1
-            | morton::spread(c.z as u32) << 2
-    }
-}
-
-/// The bounding box of `points`.
-fn bounds(points: &[Vec3]) -> (DVec3, DVec3) {
-    let (mut min, mut max) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    for &p in points {
-        (min, max) = (min.min(p), max.max(p));
-    }
-    (min.as_dvec3(), max.as_dvec3())
-}
-
 /// A batch's groups.
 pub(super) struct Groups {
     /// Indices of the queries in Morton order of their points over the
@@ -78,8 +43,8 @@ pub(super) struct Groups {
 pub(super) fn groups<M>(queries: &[Query<M>]) -> Groups {
     // The points read once from the queries (which are larger).
     let points: Vec<Vec3> = queries.iter().map(Query::point).collect();
-    let frame = MortonFrame::new(bounds(&points));
-    let codes: Vec<u64> = points.iter().map(|p| frame.code(p.as_dvec3())).collect();
+    let scene = points.iter().fold(Aabb::EMPTY, |b, &p| b.union_point(p));
+    let codes = morton::codes(points.iter().copied(), scene);
     let order = morton::sort(&codes);
     let codes: Vec<u64> = order.iter().map(|&i| codes[i as usize]).collect();
     let mut cells = Vec::new();

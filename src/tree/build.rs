@@ -156,7 +156,7 @@ impl TreeBuilder {
         let scene = lights
             .iter()
             .fold(Aabb::EMPTY, |b, l| b.union_point(l.position));
-        let codes = morton::codes(lights, scene);
+        let codes = morton::codes(lights.iter().map(|l| l.position), scene);
         let order = morton::sort(&codes);
         // Median splits reorder lights within a run of equal codes only, so
         // the sorted codes stay valid for every run.

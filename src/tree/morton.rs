@@ -1,35 +1,34 @@
 //! Morton order: lights sorted along a Z-order curve over the scene's box,
 //! so that every octree cell is a contiguous run.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 
-use crate::PointLight;
 use crate::geometry::Aabb;
 
 /// Bits of a Morton code per axis: three interleaved 21-bit coordinates
 /// fill 63 bits of a `u64`.
 pub(crate) const BITS_PER_AXIS: u32 = 21;
 
-/// Morton codes of `lights` over the cube of side the largest extent of
-/// `scene` (cubic cells, so a flat scene is split across its thin axis only
-/// once cells are as small as its thickness).
-pub(super) fn codes(lights: &[PointLight], scene: Aabb) -> Vec<u64> {
+/// Morton codes of `positions` over the cube of side the largest extent of
+/// `scene`, their box (cubic cells, so a flat scene is split across its
+/// thin axis only once cells are as small as its thickness). The tree
+/// codes its lights, the batch call its shading points.
+pub(crate) fn codes(positions: impl Iterator<Item = Vec3>, scene: Aabb) -> Vec<u64> {
     let min = scene.min.as_dvec3();
     let extent = (scene.max.as_dvec3() - min).max_element();
     let cells = f64::from(1u32 << BITS_PER_AXIS);
     let scale = if extent > 0.0 { cells / extent } else { 0.0 };
     let top = cells - 1.0;
-    lights
-        .iter()
-        .map(|l| {
-            let q = ((l.position.as_dvec3() - min) * scale).clamp(DVec3::ZERO, DVec3::splat(top));
+    positions
+        .map(|p| {
+            let q = ((p.as_dvec3() - min) * scale).clamp(DVec3::ZERO, DVec3::splat(top));
             spread(q.x as u32) | spread(q.y as u32) << 1 | spread(q.z as u32) << 2
         })
         .collect()
 }
 
 /// The 21 low bits of `v`, two zero bits inserted after each.
-pub(crate) fn spread(v: u32) -> u64 {
+fn spread(v: u32) -> u64 {
     let mut x = u64::from(v) & 0x1f_ffff;
     x = (x | x << 32) & 0x1f_0000_0000_ffff;
     x = (x | x << 16) & 0x1f_0000_ff00_00ff;
