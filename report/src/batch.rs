@@ -17,6 +17,9 @@
 //! spread over the image, the largest actual relative error over the
 //! sampled pixels against the crate's `f64` `exact_query`, and the
 //! certified bound checked there (the part fails if a pixel breaks it).
+//! The sweep runs twice: at 320x180 (with the single-point comparison, the
+//! threads and the images) and for the same shot at 1280x720 ([`HIGH`]),
+//! where each group of points covers a smaller patch of ground.
 //!
 //! Seams: [`SEAM_POINTS`] ground points along a line in `x`, shaded by one
 //! batch call (so groups form along the line) and by `shade_query` point
@@ -79,6 +82,9 @@ const THREAD_ROUNDS_PER_RUN: usize = 3;
 /// The image.
 const WIDTH: u32 = 320;
 const HEIGHT: u32 = 180;
+/// The same shot at a renderer's usual resolution, swept again: denser
+/// pixels share cuts over smaller patches of ground.
+pub const HIGH: (u32, u32) = (1280, 720);
 /// The lower-resolution view the exact image is rendered at.
 const SMALL: (u32, u32) = (160, 90);
 /// Side of the street city's blocks (see [`city_lights`]): the camera and
@@ -90,7 +96,7 @@ const EYE: Vec3 = Vec3::new(22.0, -35.0, 30.0);
 const TARGET: Vec3 = Vec3::new(52.0, 45.0, 0.0);
 const FOV_DEGREES: f32 = 50.0;
 /// Relative thresholds of the sweep.
-pub const THRESHOLDS: [f64; 7] = [0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.5];
+pub const THRESHOLDS: [f64; 8] = [0.01, 0.02, 0.05, 0.07, 0.1, 0.15, 0.2, 0.5];
 /// The threshold of the headline and of the single-point comparison.
 const HEADLINE: f64 = 0.01;
 /// Sampled pixels: the centres of a grid of this many columns and rows of
@@ -220,159 +226,56 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
         |(lo, hi), l| (lo.min(l.position), hi.max(l.position)),
     );
     let corner = (((lo + hi) * 0.5) / BLOCK).floor().with_z(0.0) * BLOCK;
-    let camera = Camera::new(corner + EYE, corner + TARGET, FOV_DEGREES, WIDTH, HEIGHT);
-    let hits = ground_hits(&camera);
-    let mut pixel_query = vec![None; hits.len()];
-    let mut queries = Vec::new();
-    for (i, hit) in hits.iter().enumerate() {
-        if let Some(p) = hit {
-            pixel_query[i] = Some(queries.len());
-            queries.push(Query::new(*p, Vec3::Z)?);
-        }
-    }
-    let (gx, gy) = SAMPLE_GRID;
-    let samples: Vec<usize> = (0..gx * gy)
-        .filter_map(|k| {
-            let x = ((k % gx) * 2 + 1) * WIDTH / (2 * gx);
-            let y = ((k / gx) * 2 + 1) * HEIGHT / (2 * gy);
-            pixel_query[(y * WIDTH + x) as usize]
-        })
-        .collect();
     let shader = Lambert::new(Vec3::ONE);
     let material = Material::diffuse(Vec3::ONE);
-    let (min_d, max_d) = queries.iter().fold((f32::INFINITY, 0.0f32), |(a, b), q| {
-        let d = q.point().distance(camera.eye);
-        (a.min(d), b.max(d))
-    });
+    let soa = SoaLights::new(&lights);
+    let shot = (corner + EYE, corner + TARGET);
+    let mut csv_rows = Vec::new();
 
+    let view = View::new(&tree, &soa, shot, (WIDTH, HEIGHT))?;
     println!(
         "## Batch shading: street city, {} lights, {WIDTH}x{HEIGHT} camera view, one core\n",
         tree.len()
     );
     println!(
-        "  tree built in {:.2} s; {} ground pixels of {} (the rest is sky), at {:.0} to {:.0} \
-         units from the eye; {} sampled pixels (centres of a {gx}x{gy} grid of cells that see \
-         the ground)",
+        "  tree built in {:.2} s; {}",
         build.as_secs_f64(),
-        queries.len(),
-        hits.len(),
-        min_d,
-        max_d,
-        samples.len()
+        view.describe()
     );
-
-    // References at the sampled pixels: the crate's f64 exact sum (in
-    // parallel, not timed), and the SIMD sum checked against it.
-    let exact: Vec<DVec3> = samples
-        .par_iter()
-        .map(|&k| tree.shading(shader).exact_query(&queries[k], Unoccluded))
-        .collect();
-    if let Some(k) = exact.iter().position(|e| !(e.min_element() > 0.0)) {
-        return Err(format!("sampled pixel {k}: exact radiance {:?}", exact[k]).into());
-    }
-    let soa = SoaLights::new(&lights);
-    let simd = |k: usize| soa.shade(&material, queries[k].point(), Vec3::Z, Vec3::Z);
-    let soa_worst = samples
-        .iter()
-        .zip(&exact)
-        .map(|(&k, &e)| relative(simd(k) - e, e))
-        .fold(0.0, |a: f64, d| if d.is_nan() || d > a { d } else { a });
-    if soa_worst.is_nan() || soa_worst > SOA_TOLERANCE {
-        return Err(format!("the SIMD exact sum is off by {soa_worst:.2e} relative").into());
-    }
-    let exact_pass = || {
-        for &k in &samples {
-            black_box(simd(black_box(k)));
-        }
-    };
+    let exact_pass = || view.exact_pass(&soa, &material);
 
     // Single-point shade_query at the headline threshold, sampled pixels.
     let mut shading = tree.shading(shader);
     let headline = Threshold::relative(HEADLINE);
-    let mut single = Vec::with_capacity(samples.len());
+    let mut single = Vec::with_capacity(view.samples.len());
     let single_timing = paired(
         runs,
-        (samples.len(), samples.len()),
+        (view.samples.len(), view.samples.len()),
         || {
             single.clear();
-            for &k in &samples {
-                single.push(shading.shade_query(&queries[k], headline, Unoccluded));
+            for &k in &view.samples {
+                single.push(shading.shade_query(&view.queries[k], headline, Unoccluded));
             }
         },
         exact_pass,
     );
     let single: Vec<ShadeResult> = single.into_iter().collect::<Result<_, _>>()?;
-    check_certified("shade_query at 1%", &single, &exact)?;
-    let single_error = max_error(&single, &exact);
+    check_certified("shade_query at 1%", &single, &view.exact)?;
+    let single_error = max_error(&single, &view.exact);
     let single_items =
         single.iter().map(|r| f64::from(r.cost())).sum::<f64>() / single.len() as f64;
 
-    // The sweep.
-    let mut results = vec![ShadeResult::default(); queries.len()];
-    let mut rows = Vec::new();
+    let mut results = vec![ShadeResult::default(); view.queries.len()];
     let mut headline_image = Vec::new();
-    for t in THRESHOLDS {
-        let threshold = Threshold::relative(t);
-        let mut stats = Ok(BatchStats::default());
-        let timing = paired(
-            runs,
-            (queries.len(), samples.len()),
-            || stats = shading.shade_batch(&queries, threshold, Unoccluded, &mut results),
-            exact_pass,
-        );
-        let stats = stats?;
-        let sampled: Vec<ShadeResult> = samples.iter().map(|&k| results[k]).collect();
-        check_certified(&format!("shade_batch at t = {t}"), &sampled, &exact)?;
-        let max_bound = results
-            .iter()
-            .map(|r| r.error_bound.max_element() / r.radiance.max_element())
-            .fold(0.0, f64::max);
-        if !(max_bound <= t) {
-            return Err(format!("shade_batch at t = {t}: a bound of {max_bound:.3e}").into());
-        }
-        rows.push(BatchRow {
-            threshold: t,
-            timing,
-            max_error: max_error(&sampled, &exact),
-            max_bound,
-            items: results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / results.len() as f64,
-            stats,
-        });
-        if t == HEADLINE {
-            headline_image = results.clone();
-        }
-    }
-
-    println!(
-        "  per pixel: the batch call over all ground pixels and the SIMD exact sum over the \
-         sampled pixels, {runs} rounds alternating one run of each; times are medians over the \
-         rounds, speed-ups the medians of the rounds' ratios. Errors and bound checks against \
-         the crate's f64 exact_query at the sampled pixels (the SIMD sum agrees with it to \
-         {soa_worst:.1e}).\n"
-    );
-    println!(
-        "| threshold | batch / pixel | SIMD exact / pixel | exact / batch | max actual rel. error \
-         (sampled) | max bound / value (all pixels) | bound held (sampled) | items / pixel | \
-         groups | shared points | points alone | shared bounds / pixel |"
-    );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for r in &rows {
-        println!(
-            "| {} | {:.2} us | {:.0} us | {:.0}x | {:.2e} | {:.2e} | yes | {:.0} | {} | {} | {} \
-             | {:.1} |",
-            r.threshold,
-            r.timing.us,
-            r.timing.exact_us,
-            r.timing.ratio,
-            r.max_error,
-            r.max_bound,
-            r.items,
-            r.stats.groups,
-            r.stats.shared_points,
-            r.stats.points_alone,
-            r.stats.shared_evaluations as f64 / queries.len() as f64
-        );
-    }
+    let rows = sweep(
+        &tree,
+        &view,
+        runs,
+        &mut results,
+        &mut headline_image,
+        exact_pass,
+    )?;
+    print_sweep(&view, runs, &rows);
     let at_one = rows
         .iter()
         .find(|r| r.threshold == HEADLINE)
@@ -385,26 +288,11 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
         single_timing.ratio,
         single_timing.us / at_one.timing.us
     );
-    println!(
-        "\ncertified 1% per pixel: {:.0} x the SIMD exact sum",
-        at_one.timing.ratio
-    );
-    // Fastest relative to the exact sum timed beside it.
-    match rows
-        .iter()
-        .filter(|r| r.max_error <= 0.01)
-        .max_by(|a, b| a.timing.ratio.total_cmp(&b.timing.ratio))
-    {
-        Some(r) => println!(
-            "fastest threshold whose largest actual error over the sampled pixels is <= 1%: {}, \
-             {:.0} x\n",
-            r.threshold, r.timing.ratio
-        ),
-        None => println!(
-            "fastest threshold whose largest actual error over the sampled pixels is <= 1%: none\n"
-        ),
-    }
+    print_headlines(&view, &rows);
+    csv_rows.push((view.size, rows));
+
     // The same call over the thread pool, against one thread.
+    let queries = &view.queries;
     let headline_threshold = Threshold::relative(HEADLINE);
     let mut parallel_results = results.clone();
     let mut parallel_stats = Ok(BatchStats::default());
@@ -415,14 +303,14 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
         (queries.len(), queries.len()),
         || {
             parallel_stats = pool.shade_batch_parallel(
-                &queries,
+                queries,
                 headline_threshold,
                 Unoccluded,
                 &mut parallel_results,
             );
         },
         || {
-            black_box(shading.shade_batch(&queries, headline_threshold, Unoccluded, &mut results))
+            black_box(shading.shade_batch(queries, headline_threshold, Unoccluded, &mut results))
                 .expect("valid threshold");
         },
     );
@@ -434,10 +322,10 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
     // the SIMD exact sum over the sampled pixels, the same way.
     let exact_threads = paired(
         thread_rounds,
-        (samples.len(), samples.len()),
+        (view.samples.len(), view.samples.len()),
         || {
-            samples.par_iter().for_each(|&k| {
-                black_box(simd(black_box(k)));
+            view.samples.par_iter().for_each(|&k| {
+                black_box(view.simd(&soa, &material, k));
             });
         },
         exact_pass,
@@ -451,26 +339,270 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
         threads.ratio,
         exact_threads.ratio
     );
-    write_batch_csv(
-        &out.join("batch.csv"),
-        tree.len(),
-        &rows,
-        (single_timing, single_error, single_items),
-    )?;
-
-    let shot = (corner + EYE, corner + TARGET);
     write_images(
         out,
         &tree,
         &soa,
         &material,
         shot,
-        &pixel_query,
+        &view.pixel_query,
         &headline_image,
     )?;
+    drop(view);
 
+    // The same shot at the higher resolution: the sweep alone.
+    let (w, h) = HIGH;
+    let view = View::new(&tree, &soa, shot, HIGH)?;
+    println!("## Batch shading: the same shot at {w}x{h}, one core\n");
+    println!("  {}", view.describe());
+    let mut results = vec![ShadeResult::default(); view.queries.len()];
+    let rows = sweep(&tree, &view, runs, &mut results, &mut Vec::new(), || {
+        view.exact_pass(&soa, &material)
+    })?;
+    print_sweep(&view, runs, &rows);
+    print_headlines(&view, &rows);
+    csv_rows.push((view.size, rows));
+    drop((view, results));
+
+    write_batch_csv(
+        &out.join("batch.csv"),
+        tree.len(),
+        &csv_rows,
+        (single_timing, single_error, single_items),
+    )?;
     let line = corner + SEAM_START;
     run_seams(out, &tree, line, runs)
+}
+
+/// The ground pixels of one image of the shot, the sampled pixels among
+/// them and their references.
+struct View {
+    size: (u32, u32),
+    eye: Vec3,
+    /// Per pixel (row-major), its query's index, `None` for the sky.
+    pixel_query: Vec<Option<usize>>,
+    queries: Vec<Query>,
+    /// Indices into `queries` of the sampled pixels.
+    samples: Vec<usize>,
+    /// The crate's `f64` exact sum at the sampled pixels.
+    exact: Vec<DVec3>,
+    /// Largest relative difference of the SIMD sum from `exact`.
+    soa_worst: f64,
+}
+
+impl View {
+    /// The image of `shot` (eye, target) at `size`, its queries, sampled
+    /// pixels and references; an error if the SIMD sum strays from the
+    /// crate's exact sum.
+    fn new(
+        tree: &LightTree,
+        soa: &SoaLights,
+        (eye, target): (Vec3, Vec3),
+        size: (u32, u32),
+    ) -> Result<Self, Box<dyn Error>> {
+        let (width, height) = size;
+        let camera = Camera::new(eye, target, FOV_DEGREES, width, height);
+        let hits = ground_hits(&camera);
+        let mut pixel_query = vec![None; hits.len()];
+        let mut queries = Vec::new();
+        for (i, hit) in hits.iter().enumerate() {
+            if let Some(p) = hit {
+                pixel_query[i] = Some(queries.len());
+                queries.push(Query::new(*p, Vec3::Z)?);
+            }
+        }
+        let (gx, gy) = SAMPLE_GRID;
+        let samples: Vec<usize> = (0..gx * gy)
+            .filter_map(|k| {
+                let x = ((k % gx) * 2 + 1) * width / (2 * gx);
+                let y = ((k / gx) * 2 + 1) * height / (2 * gy);
+                pixel_query[(y * width + x) as usize]
+            })
+            .collect();
+        // References at the sampled pixels: the crate's f64 exact sum (in
+        // parallel, not timed), and the SIMD sum checked against it.
+        let shader = Lambert::new(Vec3::ONE);
+        let exact: Vec<DVec3> = samples
+            .par_iter()
+            .map(|&k| tree.shading(shader).exact_query(&queries[k], Unoccluded))
+            .collect();
+        if let Some(k) = exact.iter().position(|e| !(e.min_element() > 0.0)) {
+            return Err(format!("sampled pixel {k}: exact radiance {:?}", exact[k]).into());
+        }
+        let mut view = Self {
+            size,
+            eye,
+            pixel_query,
+            queries,
+            samples,
+            exact,
+            soa_worst: 0.0,
+        };
+        let material = Material::diffuse(Vec3::ONE);
+        view.soa_worst = view
+            .samples
+            .iter()
+            .zip(&view.exact)
+            .map(|(&k, &e)| relative(view.simd(soa, &material, k) - e, e))
+            .fold(0.0, |a: f64, d| if d.is_nan() || d > a { d } else { a });
+        if view.soa_worst.is_nan() || view.soa_worst > SOA_TOLERANCE {
+            return Err(format!(
+                "the SIMD exact sum is off by {:.2e} relative",
+                view.soa_worst
+            )
+            .into());
+        }
+        Ok(view)
+    }
+
+    /// The SIMD exact sum at query `k`.
+    fn simd(&self, soa: &SoaLights, material: &Material, k: usize) -> DVec3 {
+        soa.shade(material, self.queries[k].point(), Vec3::Z, Vec3::Z)
+    }
+
+    /// The SIMD exact sum over the sampled pixels (timed against the batch).
+    fn exact_pass(&self, soa: &SoaLights, material: &Material) {
+        for &k in &self.samples {
+            black_box(self.simd(soa, material, black_box(k)));
+        }
+    }
+
+    /// Ground pixels, distances and samples, as a sentence.
+    fn describe(&self) -> String {
+        let (min_d, max_d) = self
+            .queries
+            .iter()
+            .fold((f32::INFINITY, 0.0f32), |(a, b), q| {
+                let d = q.point().distance(self.eye);
+                (a.min(d), b.max(d))
+            });
+        let (gx, gy) = SAMPLE_GRID;
+        format!(
+            "{} ground pixels of {} (the rest is sky), at {min_d:.0} to {max_d:.0} units from the \
+             eye; {} sampled pixels (centres of a {gx}x{gy} grid of cells that see the ground)",
+            self.queries.len(),
+            self.pixel_query.len(),
+            self.samples.len()
+        )
+    }
+}
+
+/// The batch call over every ground pixel of `view` at each threshold of
+/// [`THRESHOLDS`], timed against `exact_pass` and checked against the
+/// references; the results at [`HEADLINE`] are copied into `headline`.
+fn sweep(
+    tree: &LightTree,
+    view: &View,
+    runs: usize,
+    results: &mut [ShadeResult],
+    headline: &mut Vec<ShadeResult>,
+    exact_pass: impl Fn(),
+) -> Result<Vec<BatchRow>, Box<dyn Error>> {
+    let mut shading = tree.shading(Lambert::new(Vec3::ONE));
+    let mut rows = Vec::new();
+    for t in THRESHOLDS {
+        let threshold = Threshold::relative(t);
+        let mut stats = Ok(BatchStats::default());
+        let timing = paired(
+            runs,
+            (view.queries.len(), view.samples.len()),
+            || stats = shading.shade_batch(&view.queries, threshold, Unoccluded, results),
+            &exact_pass,
+        );
+        let stats = stats?;
+        let sampled: Vec<ShadeResult> = view.samples.iter().map(|&k| results[k]).collect();
+        let (w, h) = view.size;
+        check_certified(
+            &format!("shade_batch at {w}x{h}, t = {t}"),
+            &sampled,
+            &view.exact,
+        )?;
+        let max_bound = results
+            .iter()
+            .map(|r| r.error_bound.max_element() / r.radiance.max_element())
+            .fold(0.0, f64::max);
+        if !(max_bound <= t) {
+            return Err(format!("shade_batch at t = {t}: a bound of {max_bound:.3e}").into());
+        }
+        rows.push(BatchRow {
+            threshold: t,
+            timing,
+            max_error: max_error(&sampled, &view.exact),
+            max_bound,
+            items: results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / results.len() as f64,
+            stats,
+        });
+        if t == HEADLINE {
+            headline.clear();
+            headline.extend_from_slice(results);
+        }
+    }
+    Ok(rows)
+}
+
+/// Prints the sweep's table.
+fn print_sweep(view: &View, runs: usize, rows: &[BatchRow]) {
+    println!(
+        "  per pixel: the batch call over all ground pixels and the SIMD exact sum over the \
+         sampled pixels, {runs} rounds alternating one run of each; times are medians over the \
+         rounds, speed-ups the medians of the rounds' ratios. Errors and bound checks against \
+         the crate's f64 exact_query at the sampled pixels (the SIMD sum agrees with it to \
+         {:.1e}).\n",
+        view.soa_worst
+    );
+    println!(
+        "| threshold | batch / pixel | SIMD exact / pixel | exact / batch | max actual rel. error \
+         (sampled) | max bound / value (all pixels) | bound held (sampled) | items / pixel | \
+         groups | shared points | points alone | shared bounds / pixel |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        println!(
+            "| {} | {:.2} us | {:.0} us | {:.0}x | {:.2e} | {:.2e} | yes | {:.0} | {} | {} | {} \
+             | {:.1} |",
+            r.threshold,
+            r.timing.us,
+            r.timing.exact_us,
+            r.timing.ratio,
+            r.max_error,
+            r.max_bound,
+            r.items,
+            r.stats.groups,
+            r.stats.shared_points,
+            r.stats.points_alone,
+            r.stats.shared_evaluations as f64 / view.queries.len() as f64
+        );
+    }
+}
+
+/// Prints the certified 1% speed-up and the fastest threshold whose
+/// largest actual error over the sampled pixels is at most 1%.
+fn print_headlines(view: &View, rows: &[BatchRow]) {
+    let (w, h) = view.size;
+    let at_one = rows
+        .iter()
+        .find(|r| r.threshold == HEADLINE)
+        .expect("1% is in the sweep");
+    println!(
+        "\n{w}x{h}, certified 1% per pixel: {:.0} x the SIMD exact sum",
+        at_one.timing.ratio
+    );
+    // Fastest relative to the exact sum timed beside it.
+    match rows
+        .iter()
+        .filter(|r| r.max_error <= 0.01)
+        .max_by(|a, b| a.timing.ratio.total_cmp(&b.timing.ratio))
+    {
+        Some(r) => println!(
+            "{w}x{h}, fastest threshold whose largest actual error over the sampled pixels is \
+             <= 1%: {}, {:.0} x\n",
+            r.threshold, r.timing.ratio
+        ),
+        None => println!(
+            "{w}x{h}, fastest threshold whose largest actual error over the sampled pixels is \
+             <= 1%: none\n"
+        ),
+    }
 }
 
 /// Fails if a result breaks its certified bound against `exact`.
@@ -501,19 +633,22 @@ fn max_error(results: &[ShadeResult], exact: &[DVec3]) -> f64 {
 fn write_batch_csv(
     path: &Path,
     lights: usize,
-    rows: &[BatchRow],
+    views: &[((u32, u32), Vec<BatchRow>)],
     (single, single_error, single_items): (Timing, f64, f64),
 ) -> Result<(), Box<dyn Error>> {
     let mut text = String::from(
-        "lights,method,threshold,time_per_pixel_us,exact_per_pixel_us,exact_over_time,\
+        "lights,width,height,method,threshold,time_per_pixel_us,exact_per_pixel_us,exact_over_time,\
          max_rel_error_sampled,max_rel_bound,bound_held,mean_items,groups,shared_points,\
          points_alone,shared_evaluations\n",
     );
-    for r in rows {
+    for (r, (w, h)) in views
+        .iter()
+        .flat_map(|(size, rows)| rows.iter().map(move |r| (r, *size)))
+    {
         let (s, t) = (r.stats, r.timing);
         let _ = writeln!(
             text,
-            "{lights},shade_batch,{},{:.4},{:.2},{:.2},{:.6e},{:.6e},true,{:.1},{},{},{},{}",
+            "{lights},{w},{h},shade_batch,{},{:.4},{:.2},{:.2},{:.6e},{:.6e},true,{:.1},{},{},{},{}",
             r.threshold,
             t.us,
             t.exact_us,
@@ -529,7 +664,7 @@ fn write_batch_csv(
     }
     let _ = writeln!(
         text,
-        "{lights},shade_query (sampled pixels),{HEADLINE},{:.4},{:.2},{:.2},{single_error:.6e},,\
+        "{lights},{WIDTH},{HEIGHT},shade_query (sampled pixels),{HEADLINE},{:.4},{:.2},{:.2},{single_error:.6e},,\
          true,{single_items:.1},,,,",
         single.us, single.exact_us, single.ratio
     );

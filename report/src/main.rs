@@ -10,14 +10,15 @@
 //! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
 //! ```
 //!
-//! The full report takes about a minute on 2 cores, plus about a minute and
-//! a half for the batch part (at 10^6 lights; its exact sums dominate).
+//! The full report takes about a minute on 2 cores, plus about two minutes
+//! for the batch part (at 10^6 lights; its exact sums dominate).
 //!
 //! Parts: `evaluations` (the ground scene's evaluations per point), `bounds`
 //! (the Lambert bounds on the coloured street city, with build time and
 //! memory), `batch` (a camera's view of the street city at 10^6 lights, 10^5
-//! with `--quick`, shaded by one `shade_batch` call per threshold against
-//! the SIMD exact sum, and the seams along a scanline), `city`, `chandelier`,
+//! with `--quick`, at 320x180 and 1280x720, shaded by one `shade_batch`
+//! call per threshold against the SIMD exact sum, and the seams along a
+//! scanline), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
 //! `city-shadows` and `canopy` (the occluded scenes; `shadows` names both)
 //! and `scaling` (time against number of lights); no part named means all.
