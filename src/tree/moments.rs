@@ -432,9 +432,15 @@ impl Moments {
         let mut scales = [ZERO; 3];
         let mut squares = [ZERO; 3];
         if r > 0.0 {
-            for (c, terms) in harmonics.iter_mut().zip(&tables.terms) {
-                for &(row, n, w) in terms {
-                    mul_add(&mut c[usize::from(row)], &self.m[usize::from(n)], w);
+            // Row by row into a register: the rows' sums are independent
+            // chains, each term added in order of its monomial.
+            for (c, rows) in harmonics.iter_mut().zip(&tables.rows) {
+                for (out, terms) in c.iter_mut().zip(rows) {
+                    let mut acc = ZERO;
+                    for &(n, w) in terms {
+                        mul_add(&mut acc, &self.m[usize::from(n)], w);
+                    }
+                    *out = acc;
                 }
             }
             let mut power = [0.0; 4];
@@ -526,11 +532,11 @@ pub(crate) struct Statistics {
 /// The Schmidt semi-normalised solid harmonics of degrees 3 to 5 as
 /// linear forms in the scaled moments.
 struct HarmonicTables {
-    /// Per degree 3 to 5, the non-zero weights `N_j P_(j,a) a!` as
-    /// `(j - first j of the degree, a, weight)`, with `P_(j,a)` the
-    /// coefficient of `y^a` in the unnormalised harmonic `j` and `N_j` its
-    /// normalisation.
-    terms: [Vec<(u8, u8, f64)>; 3],
+    /// Per degree 3 to 5 and harmonic `j` of the degree, the non-zero
+    /// weights `N_j P_(j,a) a!` as `(a, weight)` by increasing `a`, with
+    /// `P_(j,a)` the coefficient of `y^a` in the unnormalised harmonic `j`
+    /// and `N_j` its normalisation.
+    rows: [Vec<Vec<(u8, f64)>>; 3],
     /// Per degree: `sqrt(sum_j max_a |weight_ja|^2)` (widened by a relative
     /// `2^-40`), so that the harmonic moments' error vector has norm at most
     /// this times the summed error of the degree's moments.
@@ -569,19 +575,18 @@ static HARMONIC_TABLES: LazyLock<HarmonicTables> = LazyLock::new(|| {
     for g in &mut error_gain {
         *g = g.sqrt() * (1.0 + 2f64.powi(-40));
     }
-    let terms = [3, 4, 5].map(|l| {
-        let mut out = Vec::new();
-        let rows = &weights[harmonic_offset(l)..harmonic_offset(l) + 2 * l + 1];
-        for (j, row) in rows.iter().enumerate() {
-            for (n, &w) in row.iter().enumerate() {
-                if w != 0.0 {
-                    out.push((j as u8, n as u8, w));
-                }
-            }
-        }
-        out
+    let rows = [3, 4, 5].map(|l| {
+        weights[harmonic_offset(l)..harmonic_offset(l) + 2 * l + 1]
+            .iter()
+            .map(|row| {
+                (row.iter().enumerate())
+                    .filter(|&(_, &w)| w != 0.0)
+                    .map(|(n, &w)| (n as u8, w))
+                    .collect()
+            })
+            .collect()
     });
-    HarmonicTables { terms, error_gain }
+    HarmonicTables { rows, error_gain }
 });
 
 const FACTORIALS: [f64; DEGREE + 1] = [1.0, 1.0, 2.0, 6.0, 24.0, 120.0];
