@@ -2,9 +2,13 @@
 //! cut, the batch call's shared cuts and sums): on `x86_64` processors with
 //! AVX2 (or AVX-512F, for the batch call's sums), copies compiled for them
 //! (wider vectors, three-operand instructions), picked at run time, so that
-//! a default build gets them.
-//! Rust never fuses a multiply and an add, and every other operation is
-//! exactly rounded the same way in both copies, so the results are the same
+//! a default build gets them. The build's statistics have a copy for AVX2
+//! with FMA.
+//! Rust never fuses a multiply and an add on its own; where the code asks
+//! for a fused one (`f64::mul_add`, in the build's moments) it is rounded
+//! once in every copy (an instruction where the processor has FMA, the
+//! correctly rounded library `fma` elsewhere), and every other operation is
+//! exactly rounded the same way in all copies, so the results are the same
 //! bits (the tests compare them).
 
 /// Whether the processor has `$feature` (a literal), unless a test asked
@@ -30,6 +34,12 @@ macro_rules! detected {
 #[inline]
 pub(crate) fn avx2() -> bool {
     detected!("avx2")
+}
+
+/// Whether the copies compiled for AVX2 and FMA may run.
+#[inline]
+pub(crate) fn avx2_fma() -> bool {
+    detected!("avx2") && detected!("fma")
 }
 
 /// Whether the copies compiled for AVX-512F may run.

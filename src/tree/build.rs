@@ -165,16 +165,23 @@ impl TreeBuilder {
         tree.order = order;
 
         // Breadth-first: children of a node are appended together, so they
-        // are contiguous. `depths[i]` is node i's depth. The statistics
-        // follow, bottom-up.
-        let mut depths: Vec<u32> = vec![0];
-        tree.nodes.push(Node::covering(0..n));
+        // are contiguous. The shape comes first, in compact records (lights
+        // and children of each node, and its depth); the nodes are made
+        // from it in one allocation, and their statistics follow,
+        // bottom-up.
+        let mut shapes = vec![Shape {
+            first_light: 0,
+            light_count: n as u32,
+            first_child: 0,
+            child_count: 0,
+            depth: 0,
+        }];
         let mut i = 0;
-        while i < tree.nodes.len() {
-            let range = tree.nodes[i].lights();
-            let depth = depths[i];
-            tree.depth = tree.depth.max(depth);
-            if range.len() > self.max_leaf_lights && depth < self.max_depth {
+        while i < shapes.len() {
+            let shape = shapes[i];
+            let range = shape.lights();
+            tree.depth = tree.depth.max(shape.depth);
+            if range.len() > self.max_leaf_lights && shape.depth < self.max_depth {
                 // The octree cell's occupied sub-cells at the first level
                 // where the codes differ; lights in one finest cell are
                 // halved at their median instead.
@@ -186,18 +193,24 @@ impl TreeBuilder {
                     ),
                 };
                 if groups.len() > 1 {
-                    tree.nodes[i].first_child = tree.nodes.len() as u32;
-                    tree.nodes[i].child_count = groups.len() as u32;
+                    shapes[i].first_child = shapes.len() as u32;
+                    shapes[i].child_count = groups.len() as u32;
                     for g in groups {
-                        let r = range.start + g.start..range.start + g.end;
-                        tree.nodes.push(Node::covering(r));
-                        depths.push(depth + 1);
+                        shapes.push(Shape {
+                            first_light: (range.start + g.start) as u32,
+                            light_count: g.len() as u32,
+                            first_child: 0,
+                            child_count: 0,
+                            depth: shape.depth + 1,
+                        });
                     }
                 }
             }
             i += 1;
         }
-        tree.nodes.shrink_to_fit();
+        drop(codes);
+        tree.nodes = shapes.iter().map(Shape::node).collect();
+        drop(shapes);
         fill_statistics(&mut tree);
         super::plane::record_planes(&mut tree);
         Ok(tree)
@@ -406,10 +419,25 @@ pub(crate) fn harmonic_norms(
     out
 }
 
-impl Node {
-    /// A node over `lights` (leaf order) with no statistics yet.
-    fn covering(lights: core::ops::Range<usize>) -> Self {
-        Self {
+/// A node's place in the tree while the build shapes it: its lights (leaf
+/// order), its children and its depth.
+#[derive(Clone, Copy, Debug)]
+struct Shape {
+    first_light: u32,
+    light_count: u32,
+    first_child: u32,
+    child_count: u32,
+    depth: u32,
+}
+
+impl Shape {
+    fn lights(&self) -> core::ops::Range<usize> {
+        self.first_light as usize..(self.first_light + self.light_count) as usize
+    }
+
+    /// The node of this shape, with no statistics yet.
+    fn node(&self) -> Node {
+        Node {
             intensity: DVec3::ZERO,
             weight: 0.0,
             moment_error: 0.0,
@@ -419,10 +447,10 @@ impl Node {
             channel_covariances: [[0.0; 6]; 3],
             harmonic_norms: [Vec3::ZERO; 3],
             aabb: Aabb::EMPTY,
-            first_light: lights.start as u32,
-            light_count: lights.len() as u32,
-            first_child: 0,
-            child_count: 0,
+            first_light: self.first_light,
+            light_count: self.light_count,
+            first_child: self.first_child,
+            child_count: self.child_count,
         }
     }
 }
@@ -445,8 +473,9 @@ impl Node {
 pub(super) fn fill_statistics(tree: &mut LightTree) {
     #[cfg(target_arch = "x86_64")]
     {
-        if crate::dispatch::avx2() {
-            // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+        if crate::dispatch::avx2_fma() {
+            // SAFETY: the processor has AVX2 and FMA (`dispatch::avx2_fma`
+            // checked).
             unsafe { fill_statistics_avx2(tree) };
             return;
         }
@@ -457,7 +486,7 @@ pub(super) fn fill_statistics(tree: &mut LightTree) {
 /// [`fill_statistics`] compiled for AVX2 (the same bits, see
 /// [`dispatch`](crate::dispatch)).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 fn fill_statistics_avx2(tree: &mut LightTree) {
     fill_statistics_inlined::<true>(tree);
 }
@@ -469,51 +498,9 @@ fn fill_statistics_avx2(tree: &mut LightTree) {
 fn fill_statistics_inlined<const AVX2: bool>(tree: &mut LightTree) {
     let lights = &tree.lights;
     let nodes = &mut tree.nodes;
-    // Per node: summed weight, weighted position and plain position.
-    let mut sums = vec![(0.0f64, DVec3::ZERO, DVec3::ZERO); nodes.len()];
-    for i in (0..nodes.len()).rev() {
-        let node = nodes[i];
-        let mut intensity = DVec3::ZERO;
-        let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
-        let mut aabb = Aabb::EMPTY;
-        if node.is_leaf() {
-            for l in &lights[node.lights()] {
-                let w = f64::from(l.weight());
-                let x = l.position.as_dvec3();
-                intensity += l.intensity.as_dvec3();
-                weight += w;
-                weighted += w * x;
-                plain += x;
-                aabb = aabb.union_point(l.position);
-            }
-        } else {
-            for c in node.children() {
-                let (w, wx, x) = sums[c];
-                intensity += nodes[c].intensity;
-                weight += w;
-                weighted += wx;
-                plain += x;
-                aabb = aabb.union(nodes[c].aabb);
-            }
-        }
-        sums[i] = (weight, weighted, plain);
-        // Zero total weight: every member is dark; use the plain mean so the
-        // node still has a sensible position (its contribution is zero
-        // either way).
-        let centroid = if weight > 0.0 {
-            weighted / weight
-        } else {
-            plain / f64::from(node.light_count)
-        };
-        let node = &mut nodes[i];
-        node.intensity = intensity;
-        node.weight = (weight as f32).min(f32::MAX);
-        // The average lies in the box in exact arithmetic; clamp away
-        // rounding.
-        node.centroid = centroid.as_vec3().clamp(aabb.min, aabb.max);
-        node.aabb = aabb;
+    if !nodes.is_empty() {
+        fill_sums(nodes, lights, 0);
     }
-    drop(sums);
     for node in nodes.iter_mut() {
         let c = node.centroid.as_dvec3();
         let radius_sq = lights[node.lights()]
@@ -536,27 +523,76 @@ fn fill_statistics_inlined<const AVX2: bool>(tree: &mut LightTree) {
     }
 }
 
+/// Intensity, weight, centroid and box of node `index` and its
+/// descendants, children before parents; returns the node's summed weight,
+/// weighted position and plain position. Depth first, so that the leaves
+/// read the lights in order.
+fn fill_sums(nodes: &mut [Node], lights: &[PointLight], index: usize) -> (f64, DVec3, DVec3) {
+    let node = &nodes[index];
+    let mut intensity = DVec3::ZERO;
+    let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
+    let mut aabb = Aabb::EMPTY;
+    if node.is_leaf() {
+        for l in &lights[node.lights()] {
+            let w = f64::from(l.weight());
+            let x = l.position.as_dvec3();
+            intensity += l.intensity.as_dvec3();
+            weight += w;
+            weighted += w * x;
+            plain += x;
+            aabb = aabb.union_point(l.position);
+        }
+    } else {
+        for c in node.children() {
+            let (w, wx, x) = fill_sums(nodes, lights, c);
+            intensity += nodes[c].intensity;
+            weight += w;
+            weighted += wx;
+            plain += x;
+            aabb = aabb.union(nodes[c].aabb);
+        }
+    }
+    let node = &mut nodes[index];
+    // Zero total weight: every member is dark; use the plain mean so the
+    // node still has a sensible position (its contribution is zero either
+    // way).
+    let centroid = if weight > 0.0 {
+        weighted / weight
+    } else {
+        plain / f64::from(node.light_count)
+    };
+    node.intensity = intensity;
+    node.weight = (weight as f32).min(f32::MAX);
+    // The average lies in the box in exact arithmetic; clamp away rounding.
+    node.centroid = centroid.as_vec3().clamp(aabb.min, aabb.max);
+    node.aabb = aabb;
+    (weight, weighted, plain)
+}
+
 /// The moments of node `index` about its centroid into `path[0]`, after
 /// its descendants' (into `path[1]`, one level down); stores the node's
 /// moment statistics. `$recurse` is the function itself (one per compiled
 /// copy).
 macro_rules! fill_moments_body {
     ($recurse:ident, $nodes:ident, $lights:ident, $index:ident, $path:ident) => {{
-        let node = $nodes[$index];
+        // The fields read, not the whole node.
+        let node = &$nodes[$index];
         let c = node.centroid.as_dvec3();
+        let (intensity, radius, count) = (node.intensity, node.radius, node.light_count);
+        let (leaf, members, children) = (node.is_leaf(), node.lights(), node.children());
         let (out, below) = $path
             .split_first_mut()
             .expect("one buffer per level of the tree");
-        if node.is_leaf() {
-            out.set_to_lights(&$lights[node.lights()], c);
+        if leaf {
+            out.set_to_lights(&$lights[members], c);
         } else {
             out.clear();
-            for k in node.children() {
+            for k in children {
                 $recurse($nodes, $lights, k, below);
                 below[0].shift_into($nodes[k].centroid.as_dvec3() - c, out);
             }
         }
-        let stats = out.statistics(node.intensity, node.radius, node.light_count as usize);
+        let stats = out.statistics(intensity, radius, count as usize);
         let node = &mut $nodes[$index];
         node.channel_offsets = stats.offsets;
         node.channel_covariances = stats.covariances;
@@ -572,7 +608,7 @@ fn fill_moments(nodes: &mut [Node], lights: &[PointLight], index: usize, path: &
 
 /// [`fill_moments`] compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 fn fill_moments_avx2(
     nodes: &mut [Node],
     lights: &[PointLight],

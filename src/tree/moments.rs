@@ -40,6 +40,8 @@
 //! most 23 roundings (20 for the powers, two products, the intensity), and
 //! the recursive sum of `n` terms `n - 1` more, so
 //! `err_l = (n + 64) f64::EPSILON abs_l` covers them with a factor two.
+//! The sums' multiply-adds are fused (`f64::mul_add`, one rounding where
+//! the count above allows two), so these counts are upper bounds.
 //!
 //! Light coordinates and intensities are `f32` values, so every moment a
 //! node stores is far inside `f64`'s normal range (its harmonic norms are
@@ -139,12 +141,45 @@ fn scaled_power_lanes(x: &LightLanes) -> [LightLanes; DEGREE + 1] {
     out
 }
 
+/// Up to [`LIGHT_LANES`] lights' terms, lane by lane: the monomials
+/// `y^a / a!` of their offsets `y` from `centre`, the scaled powers
+/// `|y|_1^l / l!` and the intensities per channel; padded lanes lie at the
+/// centre, dark.
+#[inline(always)]
+fn chunk_terms(
+    chunk: &[PointLight],
+    centre: DVec3,
+) -> (
+    [LightLanes; MONOMIALS],
+    [LightLanes; DEGREE + 1],
+    [LightLanes; 3],
+) {
+    let mut y = [[0.0; LIGHT_LANES]; 3];
+    let mut i = [[0.0; LIGHT_LANES]; 3];
+    for (k, l) in chunk.iter().enumerate() {
+        let offset = (l.position.as_dvec3() - centre).to_array();
+        let intensity = l.intensity.as_dvec3().to_array();
+        for axis in 0..3 {
+            y[axis][k] = offset[axis];
+            i[axis][k] = intensity[axis];
+        }
+    }
+    let px = scaled_power_lanes(&y[0]);
+    let py = scaled_power_lanes(&y[1]);
+    let pz = scaled_power_lanes(&y[2]);
+    let mut norm = [0.0; LIGHT_LANES];
+    for k in 0..LIGHT_LANES {
+        norm[k] = y[0][k].abs() + y[1][k].abs() + y[2][k].abs();
+    }
+    (monomial_values!(px, py, pz), scaled_power_lanes(&norm), i)
+}
+
 /// `acc[ch] += v * i[ch]` per channel, lane by lane.
 #[inline(always)]
 fn add_products(acc: &mut [LightLanes; 3], v: &LightLanes, i: &[LightLanes; 3]) {
     for (acc, i) in acc.iter_mut().zip(i) {
         for k in 0..LIGHT_LANES {
-            acc[k] += v[k] * i[k];
+            acc[k] = v[k].mul_add(i[k], acc[k]);
         }
     }
 }
@@ -266,7 +301,7 @@ const ZERO: Lanes = [0.0; 4];
 #[inline(always)]
 fn mul_add(acc: &mut Lanes, a: &Lanes, s: f64) {
     for (x, y) in acc.iter_mut().zip(a) {
-        *x += y * s;
+        *x = y.mul_add(s, *x);
     }
 }
 
@@ -321,29 +356,11 @@ impl Moments {
         let mut m = [[[0.0; LIGHT_LANES]; 3]; MONOMIALS];
         let mut abs = [[[0.0; LIGHT_LANES]; 3]; DEGREE + 1];
         for chunk in lights.chunks(LIGHT_LANES) {
-            // Padded lanes: at the centre, dark.
-            let mut y = [[0.0; LIGHT_LANES]; 3];
-            let mut i = [[0.0; LIGHT_LANES]; 3];
-            for (k, l) in chunk.iter().enumerate() {
-                let offset = (l.position.as_dvec3() - centre).to_array();
-                let intensity = l.intensity.as_dvec3().to_array();
-                for axis in 0..3 {
-                    y[axis][k] = offset[axis];
-                    i[axis][k] = intensity[axis];
-                }
-            }
-            let px = scaled_power_lanes(&y[0]);
-            let py = scaled_power_lanes(&y[1]);
-            let pz = scaled_power_lanes(&y[2]);
-            let values: [LightLanes; MONOMIALS] = monomial_values!(px, py, pz);
+            let (values, powers, i) = chunk_terms(chunk, centre);
             for (acc, v) in m.iter_mut().zip(&values) {
                 add_products(acc, v, &i);
             }
-            let mut norm = [0.0; LIGHT_LANES];
-            for k in 0..LIGHT_LANES {
-                norm[k] = y[0][k].abs() + y[1][k].abs() + y[2][k].abs();
-            }
-            for (acc, p) in abs.iter_mut().zip(&scaled_power_lanes(&norm)) {
+            for (acc, p) in abs.iter_mut().zip(&powers) {
                 add_products(acc, p, &i);
             }
         }

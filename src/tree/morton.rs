@@ -90,11 +90,26 @@ pub(super) fn children(codes: &[u64]) -> Option<smallvec::SmallVec<[core::ops::R
     let mut start = 0;
     while start < codes.len() {
         let d = digit(codes[start]);
-        let end = start + codes[start..].partition_point(|&c| digit(c) == d);
+        let end = start + gallop(&codes[start..], |c| digit(c) == d);
         out.push(start..end);
         start = end;
     }
     Some(out)
+}
+
+/// The number of leading elements of `run` that satisfy `keep` (which must
+/// hold for a prefix of `run` and fail after it): an exponential search from
+/// the front, then a binary search in the last doubling, so that finding a
+/// sub-run of length `m` reads `O(log m)` codes near its start, in cache,
+/// rather than `O(log n)` spread over the whole run.
+fn gallop(run: &[u64], keep: impl Fn(u64) -> bool) -> usize {
+    let mut bound = 1;
+    while bound < run.len() && keep(run[bound]) {
+        bound *= 2;
+    }
+    let low = bound / 2;
+    let high = bound.min(run.len());
+    low + run[low..high].partition_point(|&c| keep(c))
 }
 
 #[cfg(test)]

@@ -160,8 +160,8 @@ const SOLID: f64 = 1e-3;
 
 /// Records the plane of every node whose lights are exactly coplanar (a
 /// node's whole subtree shares its plane) unless its box is flat along an
-/// axis, which the box already settles. Examined from the root down,
-/// stopping at the first coplanar node of each path: `O(n depth)` in the
+/// axis, which the box already settles. Examined parents first, stopping
+/// at the first coplanar node of each path: `O(n depth)` in the
 /// worst case, far less where lights leave the plane early (a check fails
 /// at the first light off it).
 pub(super) fn record_planes(tree: &mut LightTree) {
@@ -170,27 +170,30 @@ pub(super) fn record_planes(tree: &mut LightTree) {
     if tree.nodes.is_empty() {
         return;
     }
+    // Parents come before their children in the node array: one pass in
+    // that order (reading the nodes in sequence) hands each node's plane
+    // down before its children are reached.
     let mut planes = vec![NO_PLANE; tree.nodes.len()];
-    let mut stack = vec![(0usize, NO_PLANE)];
-    while let Some((i, inherited)) = stack.pop() {
-        let node = tree.nodes[i];
-        let mut plane = inherited;
+    let mut found = Vec::new();
+    for (i, node) in tree.nodes.iter().enumerate() {
+        let mut plane = planes[i];
         if plane == NO_PLANE
             && node.light_count >= MIN_LIGHTS
             && (node.aabb.max - node.aabb.min).min_element() > 0.0
-            && !clearly_solid(&node)
-            && let Some(triple) = spanning_plane(tree, &node)
+            && !clearly_solid(node)
+            && let Some(triple) = spanning_plane(tree, node)
         {
-            tree.planes.push(triple);
-            plane = (tree.planes.len() - 1) as u32;
+            found.push(triple);
+            plane = (found.len() - 1) as u32;
         }
-        planes[i] = plane;
-        for child in node.children() {
-            stack.push((child, plane));
+        if plane != NO_PLANE {
+            planes[i] = plane;
+            planes[node.children()].fill(plane);
         }
     }
     // Scenes without a tilted plane of lights keep no per-node table.
-    if !tree.planes.is_empty() {
+    if !found.is_empty() {
+        tree.planes = found;
         tree.node_planes = planes;
     }
 }
