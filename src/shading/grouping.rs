@@ -45,8 +45,7 @@ pub(super) fn groups<M>(queries: &[Query<M>]) -> Groups {
     let points: Vec<Vec3> = queries.iter().map(Query::point).collect();
     let scene = points.iter().fold(Aabb::EMPTY, |b, &p| b.union_point(p));
     let codes = morton::codes(points.iter().copied(), scene);
-    let order = morton::sort(&codes);
-    let codes: Vec<u64> = order.iter().map(|&i| codes[i as usize]).collect();
+    let (order, codes) = morton::sort(&codes);
     let mut cells = Vec::new();
     morton_cells(&codes, 0..order.len(), &mut cells);
     let mut runs = Vec::with_capacity(cells.len());

@@ -157,10 +157,9 @@ impl TreeBuilder {
             .iter()
             .fold(Aabb::EMPTY, |b, l| b.union_point(l.position));
         let codes = morton::codes(lights.iter().map(|l| l.position), scene);
-        let order = morton::sort(&codes);
         // Median splits reorder lights within a run of equal codes only, so
         // the sorted codes stay valid for every run.
-        let codes: Vec<u64> = order.iter().map(|&k| codes[k as usize]).collect();
+        let (order, codes) = morton::sort(&codes);
         tree.lights = order.iter().map(|&k| lights[k as usize]).collect();
         tree.order = order;
 
