@@ -482,7 +482,7 @@ pub(super) fn fill_statistics(tree: &mut LightTree) {
     fill_statistics_inlined::<false>(tree);
 }
 
-/// [`fill_statistics`] compiled for AVX2 (the same bits, see
+/// [`fill_statistics`] compiled for AVX2 and FMA (the same bits, see
 /// [`dispatch`](crate::dispatch)).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
@@ -605,7 +605,7 @@ fn fill_moments(nodes: &mut [Node], lights: &[PointLight], index: usize, path: &
     fill_moments_body!(fill_moments, nodes, lights, index, path)
 }
 
-/// [`fill_moments`] compiled for AVX2.
+/// [`fill_moments`] compiled for AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn fill_moments_avx2(
@@ -676,8 +676,8 @@ mod copies {
     use crate::dispatch::baseline;
     use crate::{LightTree, PointLight};
 
-    /// The build's copy compiled for AVX2 (where the processor has it) and
-    /// the baseline give the same nodes, also after a refit.
+    /// The build's copy compiled for AVX2 and FMA (where the processor has
+    /// them) and the baseline give the same nodes, also after a refit.
     #[test]
     fn both_copies_of_the_build_give_the_same_nodes() {
         let mut state = 3u64;

@@ -141,39 +141,6 @@ fn scaled_power_lanes(x: &LightLanes) -> [LightLanes; DEGREE + 1] {
     out
 }
 
-/// Up to [`LIGHT_LANES`] lights' terms, lane by lane: the monomials
-/// `y^a / a!` of their offsets `y` from `centre`, the scaled powers
-/// `|y|_1^l / l!` and the intensities per channel; padded lanes lie at the
-/// centre, dark.
-#[inline(always)]
-fn chunk_terms(
-    chunk: &[PointLight],
-    centre: DVec3,
-) -> (
-    [LightLanes; MONOMIALS],
-    [LightLanes; DEGREE + 1],
-    [LightLanes; 3],
-) {
-    let mut y = [[0.0; LIGHT_LANES]; 3];
-    let mut i = [[0.0; LIGHT_LANES]; 3];
-    for (k, l) in chunk.iter().enumerate() {
-        let offset = (l.position.as_dvec3() - centre).to_array();
-        let intensity = l.intensity.as_dvec3().to_array();
-        for axis in 0..3 {
-            y[axis][k] = offset[axis];
-            i[axis][k] = intensity[axis];
-        }
-    }
-    let px = scaled_power_lanes(&y[0]);
-    let py = scaled_power_lanes(&y[1]);
-    let pz = scaled_power_lanes(&y[2]);
-    let mut norm = [0.0; LIGHT_LANES];
-    for k in 0..LIGHT_LANES {
-        norm[k] = y[0][k].abs() + y[1][k].abs() + y[2][k].abs();
-    }
-    (monomial_values!(px, py, pz), scaled_power_lanes(&norm), i)
-}
-
 /// `acc[ch] += v * i[ch]` per channel, lane by lane.
 #[inline(always)]
 fn add_products(acc: &mut [LightLanes; 3], v: &LightLanes, i: &[LightLanes; 3]) {
@@ -356,11 +323,29 @@ impl Moments {
         let mut m = [[[0.0; LIGHT_LANES]; 3]; MONOMIALS];
         let mut abs = [[[0.0; LIGHT_LANES]; 3]; DEGREE + 1];
         for chunk in lights.chunks(LIGHT_LANES) {
-            let (values, powers, i) = chunk_terms(chunk, centre);
+            // Padded lanes: at the centre, dark.
+            let mut y = [[0.0; LIGHT_LANES]; 3];
+            let mut i = [[0.0; LIGHT_LANES]; 3];
+            for (k, l) in chunk.iter().enumerate() {
+                let offset = (l.position.as_dvec3() - centre).to_array();
+                let intensity = l.intensity.as_dvec3().to_array();
+                for axis in 0..3 {
+                    y[axis][k] = offset[axis];
+                    i[axis][k] = intensity[axis];
+                }
+            }
+            let px = scaled_power_lanes(&y[0]);
+            let py = scaled_power_lanes(&y[1]);
+            let pz = scaled_power_lanes(&y[2]);
+            let values: [LightLanes; MONOMIALS] = monomial_values!(px, py, pz);
             for (acc, v) in m.iter_mut().zip(&values) {
                 add_products(acc, v, &i);
             }
-            for (acc, p) in abs.iter_mut().zip(&powers) {
+            let mut norm = [0.0; LIGHT_LANES];
+            for k in 0..LIGHT_LANES {
+                norm[k] = y[0][k].abs() + y[1][k].abs() + y[2][k].abs();
+            }
+            for (acc, p) in abs.iter_mut().zip(&scaled_power_lanes(&norm)) {
                 add_products(acc, p, &i);
             }
         }
