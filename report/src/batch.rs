@@ -232,7 +232,7 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
     let shot = (corner + EYE, corner + TARGET);
     let mut csv_rows = Vec::new();
 
-    let view = View::new(&tree, &soa, shot, (WIDTH, HEIGHT))?;
+    let view = View::new(&tree, (&soa, &material), shot, (WIDTH, HEIGHT))?;
     println!(
         "## Batch shading: street city, {} lights, {WIDTH}x{HEIGHT} camera view, one core\n",
         tree.len()
@@ -272,7 +272,7 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
         &view,
         runs,
         &mut results,
-        &mut headline_image,
+        Some(&mut headline_image),
         exact_pass,
     )?;
     print_sweep(&view, runs, &rows);
@@ -352,11 +352,11 @@ pub fn run_batch(sizes: BatchSizes, out: &Path) -> Result<(), Box<dyn Error>> {
 
     // The same shot at the higher resolution: the sweep alone.
     let (w, h) = HIGH;
-    let view = View::new(&tree, &soa, shot, HIGH)?;
+    let view = View::new(&tree, (&soa, &material), shot, HIGH)?;
     println!("## Batch shading: the same shot at {w}x{h}, one core\n");
     println!("  {}", view.describe());
     let mut results = vec![ShadeResult::default(); view.queries.len()];
-    let rows = sweep(&tree, &view, runs, &mut results, &mut Vec::new(), || {
+    let rows = sweep(&tree, &view, runs, &mut results, None, || {
         view.exact_pass(&soa, &material)
     })?;
     print_sweep(&view, runs, &rows);
@@ -396,7 +396,7 @@ impl View {
     /// crate's exact sum.
     fn new(
         tree: &LightTree,
-        soa: &SoaLights,
+        (soa, material): (&SoaLights, &Material),
         (eye, target): (Vec3, Vec3),
         size: (u32, u32),
     ) -> Result<Self, Box<dyn Error>> {
@@ -438,12 +438,11 @@ impl View {
             exact,
             soa_worst: 0.0,
         };
-        let material = Material::diffuse(Vec3::ONE);
         view.soa_worst = view
             .samples
             .iter()
             .zip(&view.exact)
-            .map(|(&k, &e)| relative(view.simd(soa, &material, k) - e, e))
+            .map(|(&k, &e)| relative(view.simd(soa, material, k) - e, e))
             .fold(0.0, |a: f64, d| if d.is_nan() || d > a { d } else { a });
         if view.soa_worst.is_nan() || view.soa_worst > SOA_TOLERANCE {
             return Err(format!(
@@ -489,13 +488,14 @@ impl View {
 
 /// The batch call over every ground pixel of `view` at each threshold of
 /// [`THRESHOLDS`], timed against `exact_pass` and checked against the
-/// references; the results at [`HEADLINE`] are copied into `headline`.
+/// references; the results at [`HEADLINE`] are copied into `headline` when
+/// one is given.
 fn sweep(
     tree: &LightTree,
     view: &View,
     runs: usize,
     results: &mut [ShadeResult],
-    headline: &mut Vec<ShadeResult>,
+    mut headline: Option<&mut Vec<ShadeResult>>,
     exact_pass: impl Fn(),
 ) -> Result<Vec<BatchRow>, Box<dyn Error>> {
     let mut shading = tree.shading(Lambert::new(Vec3::ONE));
@@ -532,7 +532,9 @@ fn sweep(
             items: results.iter().map(|r| f64::from(r.cost())).sum::<f64>() / results.len() as f64,
             stats,
         });
-        if t == HEADLINE {
+        if t == HEADLINE
+            && let Some(headline) = headline.as_deref_mut()
+        {
             headline.clear();
             headline.extend_from_slice(results);
         }
