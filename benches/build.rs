@@ -1,5 +1,6 @@
 //! Criterion bench of the tree build: `LightTree::build` over city street
-//! lamps (the report's layout, fixed density), 10^3 to 10^6 lights.
+//! lamps (the report's layout, fixed density), 10^3 to 10^6 lights, and
+//! `LightTree::build_parallel` (the same tree on rayon's pool) from 10^5.
 //!
 //! ```text
 //! cargo bench --bench build
@@ -43,12 +44,21 @@ fn build(c: &mut Criterion) {
                 .sample_size(20)
                 .measurement_time(Duration::from_secs(2));
         }
-        group.bench_with_input(BenchmarkId::from_parameter(n), &lights, |b, lights| {
+        group.bench_with_input(BenchmarkId::new("one thread", n), &lights, |b, lights| {
             b.iter(|| LightTree::build(black_box(lights)).expect("valid lights"));
         });
+        if n >= PARALLEL_FROM {
+            group.bench_with_input(BenchmarkId::new("pool", n), &lights, |b, lights| {
+                b.iter(|| LightTree::build_parallel(black_box(lights)).expect("valid lights"));
+            });
+        }
     }
     group.finish();
 }
+
+/// Sizes from which the parallel build is measured too (it builds smaller
+/// trees on the calling thread).
+const PARALLEL_FROM: usize = 100_000;
 
 criterion_group!(benches, build);
 criterion_main!(benches);

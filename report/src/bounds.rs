@@ -3,7 +3,8 @@
 //! tinted at random), certified at 1% relative: evaluations per shading
 //! point, time per point, time per evaluation and the tree's size, at
 //! 10^4, 10^5 and 10^6 lights, against the SIMD exact sum in the same run;
-//! and the build's time and memory per light.
+//! and the build's time and memory per light from 10^4 to 10^7 lights, on
+//! one thread and on rayon's pool.
 //!
 //! Bounds: the paper's (Paquette et al. 1998), the second-order Taylor
 //! bound, and the dipole multipole series (the default), all on the same
@@ -65,7 +66,7 @@ pub fn print_bounds_table() -> Result<(), Box<dyn Error>> {
         let start = Instant::now();
         let tree = LightTree::build(&lights)?;
         let build = start.elapsed().as_secs_f64();
-        builds.push((count, build, tree.memory_bytes(), tree.nodes().len()));
+        builds.push(build);
         let exact = SoaLights::new(&lights);
         let start = Instant::now();
         for p in &scene.points {
@@ -102,16 +103,61 @@ pub fn print_bounds_table() -> Result<(), Box<dyn Error>> {
         "\nEvery bound reads the same tree: {} bytes per node.\n",
         size_of::<Node>()
     );
-    println!("| lights | build / light | memory / light (lights included) | nodes / light |");
-    println!("|---|---|---|---|");
-    for (count, build, bytes, nodes) in builds {
-        println!(
-            "| {count} | {:.0} ns | {:.0} B | {:.2} |",
-            build * 1e9 / count as f64,
-            bytes as f64 / count as f64,
-            nodes as f64 / count as f64
-        );
-    }
+    print_build_table(&builds)?;
     println!();
     Ok(())
+}
+
+/// Sizes of the build table.
+const BUILD_SIZES: [usize; 4] = [10_000, 100_000, 1_000_000, 10_000_000];
+/// Builds of each kind per size in the build table, alternating.
+const BUILD_ROUNDS: usize = 3;
+
+/// The build table: per size, the first build in the process (from the
+/// bounds table above, up to 10^6 lights), then the median of
+/// [`BUILD_ROUNDS`] builds on one thread alternating with as many on
+/// rayon's pool (`build_parallel`, the same tree), the memory and the nodes
+/// per light.
+fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
+    let threads = rayon::current_num_threads();
+    println!(
+        "| lights | first build / light | build / light, one thread | build / light, {threads} threads | one / {threads} threads | memory / light (lights included) | nodes / light |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for (k, count) in BUILD_SIZES.into_iter().enumerate() {
+        let lights = coloured(&crate::scenes::city_lights(count, SEED), SEED ^ 0x7147);
+        let (mut one, mut pool) = (Vec::new(), Vec::new());
+        let mut size = (0, 0);
+        for _ in 0..BUILD_ROUNDS {
+            let start = Instant::now();
+            let tree = LightTree::build(&lights)?;
+            one.push(start.elapsed().as_secs_f64());
+            size = (tree.memory_bytes(), tree.nodes().len());
+            drop(tree);
+            let start = Instant::now();
+            let tree = LightTree::build_parallel(&lights)?;
+            pool.push(start.elapsed().as_secs_f64());
+            drop(tree);
+        }
+        let (one, pool) = (median(one), median(pool));
+        let per_light = |t: f64| t * 1e9 / count as f64;
+        let first = first
+            .get(k)
+            .map_or("-".to_string(), |&t| format!("{:.0} ns", per_light(t)));
+        println!(
+            "| {count} | {first} | {:.0} ns | {:.0} ns | {:.2}x | {:.0} B | {:.2} |",
+            per_light(one),
+            per_light(pool),
+            one / pool,
+            size.0 as f64 / count as f64,
+            size.1 as f64 / count as f64
+        );
+    }
+    Ok(())
+}
+
+/// The median of a few timings.
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
 }

@@ -6,8 +6,9 @@ use core::ops::{Add, Mul, Sub};
 use glam::{DVec3, Vec3};
 
 use super::layout::{LightTree, Node};
-use super::moments::Moments;
+use super::moments::{Moments, Statistics};
 use super::morton;
+use super::pool::Pool;
 use crate::geometry::Aabb;
 use crate::numeric::{BUILD_LENGTH_SLACK, HARMONIC_BUILD_PAD, round_up_f32};
 use crate::{BuildError, PointLight};
@@ -23,6 +24,17 @@ impl LightTree {
     /// out-of-range position, or a non-finite or negative intensity channel.
     pub fn build(lights: &[PointLight]) -> Result<Self, BuildError> {
         TreeBuilder::new().build(lights)
+    }
+
+    /// [`build`](Self::build) spread over rayon's thread pool (with the
+    /// `rayon` feature): the same tree, bit for bit (see
+    /// [`TreeBuilder::build_parallel`]).
+    ///
+    /// # Errors
+    /// As [`build`](Self::build).
+    #[cfg(feature = "rayon")]
+    pub fn build_parallel(lights: &[PointLight]) -> Result<Self, BuildError> {
+        TreeBuilder::new().build_parallel(lights)
     }
 
     /// A builder carrying the options (maximum lights per leaf, maximum depth).
@@ -127,6 +139,29 @@ impl TreeBuilder {
     /// first such light), more than `u32::MAX` lights, or
     /// `max_leaf_lights == 0`.
     pub fn build(&self, lights: &[PointLight]) -> Result<LightTree, BuildError> {
+        self.build_on(lights, Pool::ONE)
+    }
+
+    /// [`build`](Self::build) spread over rayon's thread pool (with the
+    /// `rayon` feature): the same tree, bit for bit, and the same errors.
+    ///
+    /// The moments, most of a build's work, are computed subtree by subtree
+    /// side by side, then the few nodes above those subtrees; from 32,768
+    /// lights on. The lighter passes (the checks, the Morton codes, the
+    /// sort's buckets, the gathering of the lights, the radii and the
+    /// planes) run in parallel from 524,288 lights on, below which waking
+    /// the pool's threads costs more than they gain. The split into nodes
+    /// stays on the calling thread. A pool of one thread builds on the
+    /// calling thread.
+    ///
+    /// # Errors
+    /// As [`build`](Self::build).
+    #[cfg(feature = "rayon")]
+    pub fn build_parallel(&self, lights: &[PointLight]) -> Result<LightTree, BuildError> {
+        self.build_on(lights, Pool::for_lights(lights.len()))
+    }
+
+    fn build_on(&self, lights: &[PointLight], pool: Pool) -> Result<LightTree, BuildError> {
         if self.max_leaf_lights == 0 {
             return Err(BuildError::InvalidOption("max_leaf_lights must be >= 1"));
         }
@@ -136,7 +171,7 @@ impl TreeBuilder {
                 max: u32::MAX as usize,
             });
         }
-        check_lights(lights)?;
+        check_lights(lights, pool.cheap(lights.len()))?;
 
         let n = lights.len();
         let mut tree = LightTree {
@@ -153,14 +188,21 @@ impl TreeBuilder {
         // Sort once along the Morton curve and gather the lights into that
         // order: every octree cell is then a contiguous run, and every later
         // pass over a node's lights reads memory in sequence.
-        let scene = lights
-            .iter()
-            .fold(Aabb::EMPTY, |b, l| b.union_point(l.position));
-        let codes = morton::codes(lights.iter().map(|l| l.position), scene);
+        let cheap = pool.cheap(n);
+        let scene = cheap
+            .map(&chunks(n, cheap), |r| {
+                lights[r.clone()]
+                    .iter()
+                    .fold(Aabb::EMPTY, |b, l| b.union_point(l.position))
+            })
+            .into_iter()
+            .fold(Aabb::EMPTY, Aabb::union);
+        let grid = morton::Grid::over(scene);
+        let codes = cheap.map(lights, |l| grid.code(l.position));
         // Median splits reorder lights within a run of equal codes only, so
         // the sorted codes stay valid for every run.
-        let (order, codes) = morton::sort(&codes);
-        tree.lights = order.iter().map(|&k| lights[k as usize]).collect();
+        let (order, codes) = morton::sort_on(&codes, cheap);
+        tree.lights = cheap.map(&order, |&k| lights[k as usize]);
         tree.order = order;
 
         // Breadth-first: children of a node are appended together, so they
@@ -208,15 +250,54 @@ impl TreeBuilder {
             i += 1;
         }
         drop(codes);
-        tree.nodes = shapes.iter().map(Shape::node).collect();
+        tree.nodes = cheap.map(&shapes, Shape::node);
         drop(shapes);
-        fill_statistics(&mut tree);
-        super::plane::record_planes(&mut tree);
+        fill_statistics(&mut tree, pool);
+        super::plane::record_planes(&mut tree, cheap);
         Ok(tree)
     }
 }
 
-pub(super) fn check_lights(lights: &[PointLight]) -> Result<(), BuildError> {
+/// `0..n` cut into [`Pool::parts`] ranges of nearly equal length (one when
+/// the pool is the calling thread).
+fn chunks(n: usize, pool: Pool) -> Vec<core::ops::Range<usize>> {
+    let parts = pool.parts().clamp(1, n.max(1));
+    (0..parts)
+        .map(|k| k * n / parts..(k + 1) * n / parts)
+        .collect()
+}
+
+/// The first light that cannot be built, as [`BuildError`], checked in
+/// parts on `pool` (the first failing part's first error).
+pub(super) fn check_lights(lights: &[PointLight], pool: Pool) -> Result<(), BuildError> {
+    let errors = pool.map(&chunks(lights.len(), pool), |r| {
+        check_range(&lights[r.clone()]).map_err(|e| shifted(e, r.start))
+    });
+    errors.into_iter().collect()
+}
+
+/// `error` with the light's index moved up by `by`.
+fn shifted(error: BuildError, by: usize) -> BuildError {
+    match error {
+        BuildError::NonFinitePosition { index } => {
+            BuildError::NonFinitePosition { index: index + by }
+        }
+        BuildError::PositionOutOfRange { index, max } => BuildError::PositionOutOfRange {
+            index: index + by,
+            max,
+        },
+        BuildError::NonFiniteIntensity { index } => {
+            BuildError::NonFiniteIntensity { index: index + by }
+        }
+        BuildError::NegativeIntensity { index } => {
+            BuildError::NegativeIntensity { index: index + by }
+        }
+        other => other,
+    }
+}
+
+/// [`check_lights`] on one part, indices relative to it.
+fn check_range(lights: &[PointLight]) -> Result<(), BuildError> {
     for (index, l) in lights.iter().enumerate() {
         if !l.position.is_finite() {
             return Err(BuildError::NonFinitePosition { index });
@@ -466,106 +547,229 @@ impl Shape {
 ///    leaf's lights, shifted from the children's centroids to the parent's
 ///    for every other node, depth first so that only one path's moments
 ///    are held at a time.
-// Calling the AVX2 copies is one of the crate's unsafe blocks (see
+// Calling the AVX2 copy is one of the crate's unsafe blocks (see
 // `dispatch`).
 #[allow(unsafe_code)]
-pub(super) fn fill_statistics(tree: &mut LightTree) {
+pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
+    let (lights, nodes) = (&tree.lights, &mut tree.nodes);
+    if nodes.is_empty() {
+        return;
+    }
     #[cfg(target_arch = "x86_64")]
     {
         if crate::dispatch::avx2_fma() {
             // SAFETY: the processor has AVX2 and FMA (`dispatch::avx2_fma`
             // checked).
-            unsafe { fill_statistics_avx2(tree) };
-            return;
+            unsafe { fill_sums_avx2(nodes, lights, 0) };
+        } else {
+            fill_sums(nodes, lights, 0);
         }
     }
-    fill_statistics_inlined::<false>(tree);
-}
-
-/// [`fill_statistics`] compiled for AVX2 and FMA (the same bits, see
-/// [`dispatch`](crate::dispatch)).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn fill_statistics_avx2(tree: &mut LightTree) {
-    fill_statistics_inlined::<true>(tree);
-}
-
-/// [`fill_statistics`] itself, inlined into each copy; `AVX2` picks the
-/// moments' copy.
-#[allow(unsafe_code)]
-#[inline(always)]
-fn fill_statistics_inlined<const AVX2: bool>(tree: &mut LightTree) {
-    let lights = &tree.lights;
-    let nodes = &mut tree.nodes;
-    if !nodes.is_empty() {
-        fill_sums(nodes, lights, 0);
-    }
-    for node in nodes.iter_mut() {
+    #[cfg(not(target_arch = "x86_64"))]
+    fill_sums(nodes, lights, 0);
+    pool.cheap(lights.len()).for_each_mut(nodes, |node| {
         let c = node.centroid.as_dvec3();
         let radius_sq = lights[node.lights()]
             .iter()
             .map(|l| (l.position.as_dvec3() - c).length_squared())
             .fold(0.0f64, f64::max);
         node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
+    });
+    // One buffer per level of a path.
+    let levels = tree.depth as usize + 1;
+    let path = || vec![Moments::ZERO; levels];
+    if !pool.parallel() {
+        fill_moments(&mut InPlace(nodes), lights, 0, &mut path());
+        return;
     }
-    if !nodes.is_empty() {
-        // One buffer per level of the current path.
-        let mut path = vec![Moments::ZERO; tree.depth as usize + 1];
-        #[cfg(target_arch = "x86_64")]
-        if AVX2 {
-            // SAFETY: `AVX2` is true only in `fill_statistics_avx2`, which
-            // runs where the processor has AVX2.
-            unsafe { fill_moments_avx2(nodes, lights, 0, &mut path) };
-            return;
+    // Subtrees side by side, their statistics collected, then stored; then
+    // the nodes above them, from the subtrees' moments. Each node's
+    // moments are computed by the same operations in the same order as on
+    // one thread.
+    let roots = subtrees(nodes, pool.parts());
+    let shared: &[Node] = nodes;
+    let parts = pool.map(&roots, |&root| {
+        let mut collect = Collect {
+            nodes: shared,
+            out: Vec::new(),
+        };
+        let mut path = path();
+        fill_moments(&mut collect, lights, root as usize, &mut path);
+        (root, path.swap_remove(0), collect.out)
+    });
+    let mut done = Vec::with_capacity(parts.len());
+    for (root, moments, statistics) in parts {
+        for (index, stats) in statistics {
+            store(&mut nodes[index as usize], stats);
         }
-        fill_moments(nodes, lights, 0, &mut path);
+        done.push((root, moments));
     }
+    done.sort_unstable_by_key(|d| d.0);
+    fill_moments(&mut Above { nodes, done: &done }, lights, 0, &mut path());
+}
+
+/// Roots of about `parts` disjoint subtrees that hold every leaf: from the
+/// root, the subtree of most lights is replaced by its children's while
+/// there are fewer than `parts` and it has children.
+fn subtrees(nodes: &[Node], parts: usize) -> Vec<u32> {
+    let mut roots = vec![0u32];
+    while roots.len() < parts {
+        let Some((k, &largest)) = roots
+            .iter()
+            .enumerate()
+            .max_by_key(|(_, r)| nodes[**r as usize].light_count)
+        else {
+            break;
+        };
+        let node = &nodes[largest as usize];
+        if node.is_leaf() {
+            break;
+        }
+        roots.swap_remove(k);
+        roots.extend(node.children().map(|c| c as u32));
+    }
+    roots
 }
 
 /// Intensity, weight, centroid and box of node `index` and its
 /// descendants, children before parents; returns the node's summed weight,
 /// weighted position and plain position. Depth first, so that the leaves
-/// read the lights in order.
+/// read the lights in order. `$recurse` is the function itself (one per
+/// compiled copy).
+macro_rules! fill_sums_body {
+    ($recurse:ident, $nodes:ident, $lights:ident, $index:ident) => {{
+        let node = &$nodes[$index];
+        let mut intensity = DVec3::ZERO;
+        let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
+        let mut aabb = Aabb::EMPTY;
+        if node.is_leaf() {
+            for l in &$lights[node.lights()] {
+                let w = f64::from(l.weight());
+                let x = l.position.as_dvec3();
+                intensity += l.intensity.as_dvec3();
+                weight += w;
+                weighted += w * x;
+                plain += x;
+                aabb = aabb.union_point(l.position);
+            }
+        } else {
+            for c in node.children() {
+                let (w, wx, x) = $recurse($nodes, $lights, c);
+                intensity += $nodes[c].intensity;
+                weight += w;
+                weighted += wx;
+                plain += x;
+                aabb = aabb.union($nodes[c].aabb);
+            }
+        }
+        let node = &mut $nodes[$index];
+        // Zero total weight: every member is dark; use the plain mean so the
+        // node still has a sensible position (its contribution is zero either
+        // way).
+        let centroid = if weight > 0.0 {
+            weighted / weight
+        } else {
+            plain / f64::from(node.light_count)
+        };
+        node.intensity = intensity;
+        node.weight = (weight as f32).min(f32::MAX);
+        // The average lies in the box in exact arithmetic; clamp away rounding.
+        node.centroid = centroid.as_vec3().clamp(aabb.min, aabb.max);
+        node.aabb = aabb;
+        (weight, weighted, plain)
+    }};
+}
+
+/// See [`fill_sums_body`].
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
 fn fill_sums(nodes: &mut [Node], lights: &[PointLight], index: usize) -> (f64, DVec3, DVec3) {
-    let node = &nodes[index];
-    let mut intensity = DVec3::ZERO;
-    let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
-    let mut aabb = Aabb::EMPTY;
-    if node.is_leaf() {
-        for l in &lights[node.lights()] {
-            let w = f64::from(l.weight());
-            let x = l.position.as_dvec3();
-            intensity += l.intensity.as_dvec3();
-            weight += w;
-            weighted += w * x;
-            plain += x;
-            aabb = aabb.union_point(l.position);
-        }
-    } else {
-        for c in node.children() {
-            let (w, wx, x) = fill_sums(nodes, lights, c);
-            intensity += nodes[c].intensity;
-            weight += w;
-            weighted += wx;
-            plain += x;
-            aabb = aabb.union(nodes[c].aabb);
-        }
+    fill_sums_body!(fill_sums, nodes, lights, index)
+}
+
+/// [`fill_sums`] compiled for AVX2 and FMA (no product is fused here: the
+/// same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn fill_sums_avx2(nodes: &mut [Node], lights: &[PointLight], index: usize) -> (f64, DVec3, DVec3) {
+    fill_sums_body!(fill_sums_avx2, nodes, lights, index)
+}
+
+/// Where the moments' recursion reads the nodes and puts their statistics.
+trait Access {
+    fn nodes(&self) -> &[Node];
+    fn store(&mut self, index: usize, stats: Statistics);
+    /// The moments of node `index` if they were computed elsewhere (a
+    /// subtree done on another thread): the recursion stops there.
+    #[inline(always)]
+    fn done(&self, index: usize) -> Option<&Moments> {
+        let _ = index;
+        None
     }
-    let node = &mut nodes[index];
-    // Zero total weight: every member is dark; use the plain mean so the
-    // node still has a sensible position (its contribution is zero either
-    // way).
-    let centroid = if weight > 0.0 {
-        weighted / weight
-    } else {
-        plain / f64::from(node.light_count)
-    };
-    node.intensity = intensity;
-    node.weight = (weight as f32).min(f32::MAX);
-    // The average lies in the box in exact arithmetic; clamp away rounding.
-    node.centroid = centroid.as_vec3().clamp(aabb.min, aabb.max);
-    node.aabb = aabb;
-    (weight, weighted, plain)
+}
+
+/// Statistics stored in the nodes as they are computed.
+struct InPlace<'a>(&'a mut [Node]);
+
+impl Access for InPlace<'_> {
+    #[inline(always)]
+    fn nodes(&self) -> &[Node] {
+        self.0
+    }
+    #[inline(always)]
+    fn store(&mut self, index: usize, stats: Statistics) {
+        store(&mut self.0[index], stats);
+    }
+}
+
+/// Statistics of one subtree collected, the nodes shared between threads.
+struct Collect<'a> {
+    nodes: &'a [Node],
+    out: Vec<(u32, Statistics)>,
+}
+
+impl Access for Collect<'_> {
+    #[inline(always)]
+    fn nodes(&self) -> &[Node] {
+        self.nodes
+    }
+    #[inline(always)]
+    fn store(&mut self, index: usize, stats: Statistics) {
+        self.out.push((index as u32, stats));
+    }
+}
+
+/// The nodes above subtrees whose moments are `done` (by root index).
+struct Above<'a> {
+    nodes: &'a mut [Node],
+    done: &'a [(u32, Moments)],
+}
+
+impl Access for Above<'_> {
+    #[inline(always)]
+    fn nodes(&self) -> &[Node] {
+        self.nodes
+    }
+    #[inline(always)]
+    fn store(&mut self, index: usize, stats: Statistics) {
+        store(&mut self.nodes[index], stats);
+    }
+    #[inline(always)]
+    fn done(&self, index: usize) -> Option<&Moments> {
+        let k = self
+            .done
+            .binary_search_by_key(&(index as u32), |d| d.0)
+            .ok()?;
+        Some(&self.done[k].1)
+    }
+}
+
+/// `stats` into `node`.
+#[inline(always)]
+fn store(node: &mut Node, stats: Statistics) {
+    node.channel_offsets = stats.offsets;
+    node.channel_covariances = stats.covariances;
+    node.harmonic_norms = stats.harmonic_norms;
+    node.moment_error = stats.moment_error;
 }
 
 /// The moments of node `index` about its centroid into `path[0]`, after
@@ -573,48 +777,77 @@ fn fill_sums(nodes: &mut [Node], lights: &[PointLight], index: usize) -> (f64, D
 /// moment statistics. `$recurse` is the function itself (one per compiled
 /// copy).
 macro_rules! fill_moments_body {
-    ($recurse:ident, $nodes:ident, $lights:ident, $index:ident, $path:ident) => {{
-        // The fields read, not the whole node.
-        let node = &$nodes[$index];
-        let c = node.centroid.as_dvec3();
-        let (intensity, radius, count) = (node.intensity, node.radius, node.light_count);
-        let (leaf, members, children) = (node.is_leaf(), node.lights(), node.children());
+    ($recurse:ident, $access:ident, $lights:ident, $index:ident, $path:ident) => {{
         let (out, below) = $path
             .split_first_mut()
             .expect("one buffer per level of the tree");
+        if let Some(done) = $access.done($index) {
+            *out = *done;
+            return;
+        }
+        // The fields read, not the whole node.
+        let node = &$access.nodes()[$index];
+        let c = node.centroid.as_dvec3();
+        let (intensity, radius, count) = (node.intensity, node.radius, node.light_count);
+        let (leaf, members, children) = (node.is_leaf(), node.lights(), node.children());
         if leaf {
             out.set_to_lights(&$lights[members], c);
         } else {
             out.clear();
             for k in children {
-                $recurse($nodes, $lights, k, below);
-                below[0].shift_into($nodes[k].centroid.as_dvec3() - c, out);
+                $recurse($access, $lights, k, below);
+                let t = $access.nodes()[k].centroid.as_dvec3() - c;
+                below[0].shift_into(t, out);
             }
         }
         let stats = out.statistics(intensity, radius, count as usize);
-        let node = &mut $nodes[$index];
-        node.channel_offsets = stats.offsets;
-        node.channel_covariances = stats.covariances;
-        node.harmonic_norms = stats.harmonic_norms;
-        node.moment_error = stats.moment_error;
+        $access.store($index, stats);
     }};
 }
 
-/// See [`fill_moments_body`].
-fn fill_moments(nodes: &mut [Node], lights: &[PointLight], index: usize, path: &mut [Moments]) {
-    fill_moments_body!(fill_moments, nodes, lights, index, path)
+/// See [`fill_moments_body`]: on `x86_64` processors with AVX2 and FMA, a
+/// copy compiled for them (the same bits, see [`dispatch`](crate::dispatch)).
+// Calling the AVX2 copy is one of the crate's unsafe blocks (see
+// `dispatch`).
+#[allow(unsafe_code)]
+fn fill_moments<A: Access>(
+    access: &mut A,
+    lights: &[PointLight],
+    index: usize,
+    path: &mut [Moments],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if crate::dispatch::avx2_fma() {
+            // SAFETY: the processor has AVX2 and FMA (`dispatch::avx2_fma`
+            // checked).
+            unsafe { fill_moments_avx2(access, lights, index, path) };
+            return;
+        }
+    }
+    fill_moments_baseline(access, lights, index, path);
+}
+
+/// [`fill_moments`] in the baseline build.
+fn fill_moments_baseline<A: Access>(
+    access: &mut A,
+    lights: &[PointLight],
+    index: usize,
+    path: &mut [Moments],
+) {
+    fill_moments_body!(fill_moments_baseline, access, lights, index, path)
 }
 
 /// [`fill_moments`] compiled for AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn fill_moments_avx2(
-    nodes: &mut [Node],
+fn fill_moments_avx2<A: Access>(
+    access: &mut A,
     lights: &[PointLight],
     index: usize,
     path: &mut [Moments],
 ) {
-    fill_moments_body!(fill_moments_avx2, nodes, lights, index, path)
+    fill_moments_body!(fill_moments_avx2, access, lights, index, path)
 }
 
 #[cfg(test)]
@@ -699,5 +932,91 @@ mod copies {
         a.refit(&moved).unwrap();
         baseline(|| b.refit(&moved).unwrap());
         assert_eq!(a.nodes(), b.nodes());
+    }
+}
+
+#[cfg(all(test, feature = "rayon"))]
+mod parallel {
+    use glam::Vec3;
+
+    use crate::{BuildError, LightTree, PointLight, TreeBuilder};
+
+    /// Lights enough for the pool: clusters of street lights, a tilted roof
+    /// of lights exactly in one plane, and coincident lights.
+    fn lights(seed: u64, count: usize) -> Vec<PointLight> {
+        let mut state = seed;
+        let mut uniform = move || crate::testing::uniform(&mut state);
+        (0..count)
+            .map(|i| {
+                let p = match i % 5 {
+                    0 => Vec3::new(uniform() * 2000.0, uniform() * 2000.0, 6.0),
+                    1 => {
+                        // z = (x + y) / 4 on the integers: exactly one plane.
+                        let (x, y) = ((uniform() * 64.0).floor(), (uniform() * 64.0).floor());
+                        Vec3::new(x, y, (x + y) * 0.25)
+                    }
+                    2 => Vec3::new(500.0, 500.0, 20.0),
+                    _ => Vec3::new(uniform() * 300.0, uniform() * 300.0, uniform() * 90.0),
+                };
+                PointLight::new(p, Vec3::new(uniform(), uniform() * 3.0, uniform() * 0.5))
+            })
+            .collect()
+    }
+
+    /// `f` on a pool of two threads, whatever the machine has.
+    fn on_two_threads<T: Send>(f: impl FnOnce() -> T + Send) -> T {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap()
+            .install(f)
+    }
+
+    fn assert_same(a: &LightTree, b: &LightTree) {
+        assert_eq!(a.nodes, b.nodes);
+        assert_eq!(a.lights, b.lights);
+        assert_eq!(a.order, b.order);
+        assert_eq!(a.depth, b.depth);
+        assert_eq!(a.planes, b.planes);
+        assert_eq!(a.node_planes, b.node_planes);
+    }
+
+    #[test]
+    fn a_parallel_build_and_refit_give_the_tree_of_one_thread() {
+        let lights = lights(5, 60_000);
+        let one = LightTree::build(&lights).unwrap();
+        let pool = on_two_threads(|| LightTree::build_parallel(&lights).unwrap());
+        assert!(!one.planes.is_empty(), "the roof is recorded as a plane");
+        assert_same(&one, &pool);
+
+        let builder = TreeBuilder::new().max_leaf_lights(3).max_depth(9);
+        let one = builder.build(&lights).unwrap();
+        let mut pool = on_two_threads(|| builder.build_parallel(&lights).unwrap());
+        assert_same(&one, &pool);
+
+        let moved: Vec<PointLight> = lights
+            .iter()
+            .map(|l| PointLight::new(l.position * 0.5 - Vec3::ONE, l.intensity * 2.0))
+            .collect();
+        let mut one = one;
+        one.refit(&moved).unwrap();
+        on_two_threads(|| pool.refit_parallel(&moved).unwrap());
+        assert_same(&one, &pool);
+    }
+
+    #[test]
+    fn a_parallel_build_reports_the_first_bad_light() {
+        let mut lights = lights(9, 50_000);
+        lights[41_234].intensity.y = f32::NAN;
+        lights[45_000].position.x = f32::INFINITY;
+        let one = LightTree::build(&lights).unwrap_err();
+        let pool = on_two_threads(|| LightTree::build_parallel(&lights).unwrap_err());
+        assert_eq!(one, BuildError::NonFiniteIntensity { index: 41_234 });
+        assert_eq!(one, pool);
+
+        let mut tree = LightTree::build(&lights[..40_000]).unwrap();
+        lights[33_000].intensity.z = -1.0;
+        let refit = on_two_threads(|| tree.refit_parallel(&lights[3_001..43_001]).unwrap_err());
+        assert_eq!(refit, BuildError::NegativeIntensity { index: 29_999 });
     }
 }

@@ -6,6 +6,7 @@ mod layout;
 mod moments;
 pub(crate) mod morton;
 mod plane;
+mod pool;
 mod refit;
 mod validate;
 

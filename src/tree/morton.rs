@@ -3,6 +3,7 @@
 
 use glam::{DVec3, Vec3};
 
+use super::pool::Pool;
 use crate::geometry::Aabb;
 
 /// Bits of a Morton code per axis: three interleaved 21-bit coordinates
@@ -14,17 +15,34 @@ pub(crate) const BITS_PER_AXIS: u32 = 21;
 /// thin axis only once cells are as small as its thickness). The tree
 /// codes its lights, the batch call its shading points.
 pub(crate) fn codes(positions: impl Iterator<Item = Vec3>, scene: Aabb) -> Vec<u64> {
-    let min = scene.min.as_dvec3();
-    let extent = (scene.max.as_dvec3() - min).max_element();
-    let cells = f64::from(1u32 << BITS_PER_AXIS);
-    let scale = if extent > 0.0 { cells / extent } else { 0.0 };
-    let top = cells - 1.0;
-    positions
-        .map(|p| {
-            let q = ((p.as_dvec3() - min) * scale).clamp(DVec3::ZERO, DVec3::splat(top));
-            spread(q.x as u32) | spread(q.y as u32) << 1 | spread(q.z as u32) << 2
-        })
-        .collect()
+    let grid = Grid::over(scene);
+    positions.map(|p| grid.code(p)).collect()
+}
+
+/// The cells of [`codes`]: the cube over a scene's box.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Grid {
+    min: DVec3,
+    scale: f64,
+}
+
+impl Grid {
+    /// The grid of cubic cells over the box `scene`.
+    pub(crate) fn over(scene: Aabb) -> Self {
+        let min = scene.min.as_dvec3();
+        let extent = (scene.max.as_dvec3() - min).max_element();
+        let cells = f64::from(1u32 << BITS_PER_AXIS);
+        let scale = if extent > 0.0 { cells / extent } else { 0.0 };
+        Self { min, scale }
+    }
+
+    /// The Morton code of the cell holding `p`.
+    #[inline]
+    pub(crate) fn code(&self, p: Vec3) -> u64 {
+        let top = f64::from(1u32 << BITS_PER_AXIS) - 1.0;
+        let q = ((p.as_dvec3() - self.min) * self.scale).clamp(DVec3::ZERO, DVec3::splat(top));
+        spread(q.x as u32) | spread(q.y as u32) << 1 | spread(q.z as u32) << 2
+    }
 }
 
 /// The 21 low bits of `v`, two zero bits inserted after each.
@@ -69,6 +87,11 @@ const MAX_PASSES: usize = 5;
 /// sizes). Each bucket is then sorted on its own, in cache, by
 /// [`sort_run`]. The scatter is stable and so is each bucket's sort.
 pub(crate) fn sort(codes: &[u64]) -> (Vec<u32>, Vec<u64>) {
+    sort_on(codes, Pool::ONE)
+}
+
+/// [`sort`], the buckets sorted on `pool` (the same result).
+pub(crate) fn sort_on(codes: &[u64], pool: Pool) -> (Vec<u32>, Vec<u64>) {
     let n = codes.len();
     let varying = varying_bits(codes);
     if varying == 0 {
@@ -102,17 +125,29 @@ pub(crate) fn sort(codes: &[u64]) -> (Vec<u32>, Vec<u64>) {
         largest = largest.max(end as usize - start);
         start = end as usize;
     }
-    let mut scratch = Scratch {
-        keys: vec![0; largest],
-        order: vec![0; largest],
-        counts: Vec::new(),
-    };
+    // The buckets, each a run of the keys and of the indices.
+    let mut runs = Vec::with_capacity(ends.len());
+    let (mut rest_keys, mut rest_order) = (&mut keys[..], &mut order[..]);
     let mut start = 0;
     for &end in &ends {
-        let end = end as usize;
-        sort_run(&mut keys[start..end], &mut order[start..end], &mut scratch);
-        start = end;
+        let len = end as usize - start;
+        let (run_keys, k) = rest_keys.split_at_mut(len);
+        let (run_order, o) = rest_order.split_at_mut(len);
+        (rest_keys, rest_order) = (k, o);
+        if len > 1 {
+            runs.push((run_keys, run_order));
+        }
+        start = end as usize;
     }
+    pool.for_each_with(
+        runs,
+        || Scratch {
+            keys: vec![0; largest],
+            order: vec![0; largest],
+            counts: Vec::new(),
+        },
+        |scratch, (keys, order)| sort_run(keys, order, scratch),
+    );
     (order, keys)
 }
 

@@ -15,6 +15,7 @@
 use glam::{DVec3, Vec3};
 
 use super::layout::{LightTree, NO_PLANE, Node};
+use super::pool::Pool;
 use crate::numeric::dot_of_difference;
 
 /// Bits of the integers coordinates become on a node's grid: differences
@@ -164,12 +165,31 @@ const SOLID: f64 = 1e-3;
 /// at the first coplanar node of each path: `O(n depth)` in the
 /// worst case, far less where lights leave the plane early (a check fails
 /// at the first light off it).
-pub(super) fn record_planes(tree: &mut LightTree) {
+pub(super) fn record_planes(tree: &mut LightTree, pool: Pool) {
     tree.planes.clear();
     tree.node_planes.clear();
     if tree.nodes.is_empty() {
         return;
     }
+    let examined = |node: &Node| {
+        node.light_count >= MIN_LIGHTS
+            && (node.aabb.max - node.aabb.min).min_element() > 0.0
+            && !clearly_solid(node)
+    };
+    // On a pool, every node's own plane is looked for first, side by side;
+    // the pass below then takes those it would have looked for.
+    let spanned = if pool.parallel() {
+        let tree = &*tree;
+        pool.map(&tree.nodes, |node| {
+            if examined(node) {
+                spanning_plane(tree, node)
+            } else {
+                None
+            }
+        })
+    } else {
+        Vec::new()
+    };
     // Parents come before their children in the node array: one pass in
     // that order (reading the nodes in sequence) hands each node's plane
     // down before its children are reached.
@@ -178,10 +198,11 @@ pub(super) fn record_planes(tree: &mut LightTree) {
     for (i, node) in tree.nodes.iter().enumerate() {
         let mut plane = planes[i];
         if plane == NO_PLANE
-            && node.light_count >= MIN_LIGHTS
-            && (node.aabb.max - node.aabb.min).min_element() > 0.0
-            && !clearly_solid(node)
-            && let Some(triple) = spanning_plane(tree, node)
+            && let Some(triple) = match spanned.get(i) {
+                Some(triple) => *triple,
+                None if examined(node) => spanning_plane(tree, node),
+                None => None,
+            }
         {
             found.push(triple);
             plane = (found.len() - 1) as u32;

@@ -2,6 +2,7 @@
 
 use super::build::{check_lights, fill_statistics};
 use super::layout::LightTree;
+use super::pool::Pool;
 use crate::{BuildError, PointLight};
 
 impl LightTree {
@@ -19,18 +20,34 @@ impl LightTree {
     /// The same [`BuildError`]s as building, checked before anything changes;
     /// [`BuildError::LightCountMismatch`] when the length differs.
     pub fn refit(&mut self, lights: &[PointLight]) -> Result<(), BuildError> {
+        self.refit_on(lights, Pool::ONE)
+    }
+
+    /// [`refit`](Self::refit) spread over rayon's thread pool (with the
+    /// `rayon` feature): the same nodes, bit for bit, and the same errors.
+    /// Trees of fewer than 32,768 lights, or a pool of one thread, refit on
+    /// the calling thread.
+    ///
+    /// # Errors
+    /// As [`refit`](Self::refit).
+    #[cfg(feature = "rayon")]
+    pub fn refit_parallel(&mut self, lights: &[PointLight]) -> Result<(), BuildError> {
+        self.refit_on(lights, Pool::for_lights(lights.len()))
+    }
+
+    fn refit_on(&mut self, lights: &[PointLight], pool: Pool) -> Result<(), BuildError> {
         if lights.len() != self.lights.len() {
             return Err(BuildError::LightCountMismatch {
                 expected: self.lights.len(),
                 got: lights.len(),
             });
         }
-        check_lights(lights)?;
-        for (slot, &k) in self.lights.iter_mut().zip(&self.order) {
-            *slot = lights[k as usize];
-        }
-        fill_statistics(self);
-        super::plane::record_planes(self);
+        check_lights(lights, pool.cheap(lights.len()))?;
+        let order = &self.order;
+        pool.cheap(order.len())
+            .fill(&mut self.lights, |i| lights[order[i] as usize]);
+        fill_statistics(self, pool);
+        super::plane::record_planes(self, pool.cheap(lights.len()));
         Ok(())
     }
 }
