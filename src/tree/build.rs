@@ -74,6 +74,9 @@ impl LightTree {
 /// [`Shader::horizon`](crate::Shader::horizon)), and the cut settles it
 /// without walking its lights. Scenes without such
 /// planes store nothing for them.
+///
+/// With the `rayon` feature, `build_parallel` builds the same tree, bit for
+/// bit, on rayon's thread pool.
 #[derive(Clone, Copy, Debug)]
 #[must_use]
 pub struct TreeBuilder {
