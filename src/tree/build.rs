@@ -603,7 +603,7 @@ pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
     // one thread.
     let roots = subtrees(nodes, pool.parts());
     let shared: &[Node] = nodes;
-    let parts = pool.map(&roots, |&root| {
+    let parts = pool.map_shared(&roots, |&root| {
         let mut collect = Collect {
             nodes: shared,
             out: Vec::new(),

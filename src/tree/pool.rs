@@ -102,6 +102,48 @@ impl Pool {
         }
     }
 
+    /// `items.map(f)`, in order, the calling thread taking items too: it
+    /// asks the pool for one helper fewer than its threads and takes items
+    /// from the same counter as they do. Where a helper starts late (on a
+    /// busy machine the pool's threads can take milliseconds to run), the
+    /// calling thread does its share, so the call is never much slower than
+    /// on one thread.
+    pub(crate) fn map_shared<T: Sync, U: Send + Sync>(
+        self,
+        items: &[T],
+        f: impl Fn(&T) -> U + Sync + Send,
+    ) -> Vec<U> {
+        #[cfg(feature = "rayon")]
+        if self.parallel {
+            use std::sync::OnceLock;
+            use std::sync::atomic::{AtomicUsize, Ordering};
+            let next = AtomicUsize::new(0);
+            let results: Vec<OnceLock<U>> = items.iter().map(|_| OnceLock::new()).collect();
+            let work = || {
+                loop {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(item) = items.get(k) else {
+                        break;
+                    };
+                    // Each index is taken once, so its slot is empty.
+                    let _ = results[k].set(f(item));
+                }
+            };
+            rayon::in_place_scope(|scope| {
+                for _ in 1..rayon::current_num_threads() {
+                    scope.spawn(|_| work());
+                }
+                work();
+            });
+            // A panic in a helper is raised by the scope, before this.
+            return results
+                .into_iter()
+                .map(|r| r.into_inner().expect("every item was taken"))
+                .collect();
+        }
+        items.iter().map(f).collect()
+    }
+
     /// `f` on every item.
     pub(crate) fn for_each_mut<T: Send>(self, items: &mut [T], f: impl Fn(&mut T) + Sync + Send) {
         #[cfg(feature = "rayon")]
