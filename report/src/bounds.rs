@@ -20,6 +20,7 @@ use rand::RngExt;
 use crate::config::SEED;
 use crate::exact::SoaLights;
 use crate::scenes::{city, rng};
+use crate::sweep::median;
 
 /// Numbers of lights.
 const SIZES: [usize; 3] = [10_000, 100_000, 1_000_000];
@@ -154,10 +155,4 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
         );
     }
     Ok(())
-}
-
-/// The median of a few timings.
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }

@@ -149,8 +149,8 @@ impl TreeBuilder {
     /// `rayon` feature): the same tree, bit for bit, and the same errors.
     ///
     /// The moments, most of a build's work, are computed subtree by subtree
-    /// side by side, then the few nodes above those subtrees; from 32,768
-    /// lights on. The lighter passes (the checks, the Morton codes, the
+    /// side by side (the calling thread takes subtrees too), then the few
+    /// nodes above those subtrees; from 32,768 lights on. The lighter passes (the checks, the Morton codes, the
     /// sort's buckets, the gathering of the lights, the radii and the
     /// planes) run in parallel from 524,288 lights on, below which waking
     /// the pool's threads costs more than they gain. The split into nodes
