@@ -1,15 +1,18 @@
 //! Which compiled copy of the hot code runs (the build's statistics, the
-//! cut, the batch call's shared cuts and sums): on `x86_64` processors with
-//! AVX2 (or AVX-512F, for the batch call's sums), copies compiled for them
-//! (wider vectors, three-operand instructions), picked at run time, so that
-//! a default build gets them. The build's statistics have a copy for AVX2
+//! cut and its sums of lights, the batch call's shared cuts and sums): on
+//! `x86_64` processors with AVX2 (or AVX-512F, for the batch call's sums),
+//! copies compiled for them (wider vectors, three-operand instructions),
+//! picked at run time, so that a default build gets them. The build's statistics have a copy for AVX2
 //! with FMA.
 //! Rust never fuses a multiply and an add on its own; where the code asks
 //! for a fused one (`f64::mul_add`, in the build's moments) it is rounded
 //! once in every copy (an instruction where the processor has FMA, the
 //! correctly rounded library `fma` elsewhere), and every other operation is
 //! exactly rounded the same way in all copies, so the results are the same
-//! bits (the tests compare them).
+//! bits (the tests compare them). [`Lambert`](crate::Lambert)'s sum of a
+//! leaf's lights is written with AVX2 instructions themselves (the
+//! compiler's own vectors for it gathered the lights' coordinates one by
+//! one), the same operations lane by lane as its baseline copy.
 
 /// Whether the processor has `$feature` (a literal), unless a test asked
 /// for the baseline copies on this thread.

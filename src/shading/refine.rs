@@ -10,7 +10,7 @@ use super::result::Stop;
 use super::threshold::Threshold;
 use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, SUM_SLACK};
-use crate::shader::{NodeEstimate, Shader};
+use crate::shader::{NodeEstimate, SUM_LIGHTS_MAX, Shader};
 use crate::tree::{LightTree, NO_PLANE, Node};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 
@@ -28,6 +28,10 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     /// Largest visible node summed light by light instead of bounded: 0
     /// with interpolation, whose blend ramps through bounded nodes.
     exact_lights: u32,
+    /// Whether visible lights are added one at a time to the compensated
+    /// sum (a target of 0, see [`Threshold::exact`]) rather than a few at a
+    /// time ([`Shader::sum_lights`]).
+    one_by_one: bool,
     pub(crate) visibility: V,
     /// Exact leaves and nodes that need no refinement.
     pub(crate) settled: CompensatedSum,
@@ -84,6 +88,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             } else {
                 EXACT_NODE_LIGHTS
             },
+            one_by_one: threshold.is_exact(),
             visibility,
             settled: CompensatedSum::default(),
             nodes: 0,
@@ -458,8 +463,20 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// [`exact_light`](Self::exact_light).
     #[inline(always)]
     fn sum_lights(&mut self, range: core::ops::Range<usize>, seen: Seen, weight: f64) {
-        const CHUNK: usize = 16;
+        const CHUNK: usize = SUM_LIGHTS_MAX;
         let tree = self.tree;
+        if seen == Seen::Visible && !self.one_by_one {
+            // No host query: the lights' sum, a chunk at a time, each chunk
+            // a plain sum of non-negative terms (see `Shader::sum_lights`).
+            for lights in tree.lights[range].chunks(CHUNK) {
+                self.lights += lights.len() as u32;
+                let sum = self
+                    .shader
+                    .sum_lights(&self.per_point, self.surface, lights);
+                self.settled.add(sum * weight);
+            }
+            return;
+        }
         let mut values = [DVec3::ZERO; CHUNK];
         for lights in tree.lights[range].chunks(CHUNK) {
             let values = &mut values[..lights.len()];

@@ -84,7 +84,11 @@ impl Threshold {
     }
 
     /// Threshold 0: refine until every remaining node has zero error (the
-    /// exact sum, up to rounding).
+    /// exact sum, up to rounding). With a target of 0 the cut adds lights
+    /// one at a time to its compensated sum, as
+    /// [`Shading::exact_query`](crate::Shading::exact_query) does, rather
+    /// than a few at a time ([`Shader::sum_lights`](crate::Shader::sum_lights)),
+    /// so that it returns the same value.
     #[must_use]
     pub const fn exact() -> Self {
         Self::absolute(0.0)
@@ -240,6 +244,14 @@ impl Threshold {
             return Err(ShadeError::InvalidBand(b));
         }
         Ok(())
+    }
+
+    /// Whether the target is 0: the exact sum is asked for.
+    #[inline]
+    pub(crate) fn is_exact(&self) -> bool {
+        match self.target {
+            Target::Absolute(t) | Target::Relative(t) | Target::PerNode(t) => t == 0.0,
+        }
     }
 
     /// Whether a cut with this summed estimate, certified error bound and
