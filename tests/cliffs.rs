@@ -78,3 +78,62 @@ fn exponentially_clustered_lights_leave_small_leaves() {
         lights.len()
     );
 }
+
+/// A small scene is summed light by light rather than cut, where its lights
+/// are known visible: the root's bound, then every light, with no error. A
+/// threshold the root meets alone still stops there, and with
+/// interpolation, a budget below the lights, or coincident lights, the cut
+/// bounds nodes as before.
+#[test]
+fn a_small_scene_is_summed_light_by_light() {
+    let lights: Vec<PointLight> = (0..200)
+        .map(|i| {
+            let (x, y) = ((i % 20) as f32, (i / 20) as f32);
+            PointLight::new(
+                Vec3::new(x, y, 3.0 + (i % 3) as f32),
+                Vec3::new(1.0, 0.5, 0.25),
+            )
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::ONE));
+    // Beside the lights, outside the root's ball, facing them.
+    let (p, n) = (Vec3::new(-14.0, 4.5, 0.0), Vec3::X);
+    assert!(tree.root().unwrap().cone(p.as_dvec3()).is_some());
+    let exact = s.exact(p, n).unwrap();
+    for t in [0.01, 0.001] {
+        let r = s.shade(p, n, Threshold::relative(t)).unwrap();
+        assert_eq!((r.nodes_evaluated, r.lights_evaluated), (1, 200), "{r:?}");
+        assert_eq!(r.error_bound, glam::DVec3::ZERO);
+        assert!(r.certifies(exact), "{r:?}");
+    }
+    // Thresholds the root meets alone stop there.
+    for t in [Threshold::relative(0.3), Threshold::absolute(f64::INFINITY)] {
+        let root = s.shade(p, n, t).unwrap();
+        assert_eq!(root.cost(), 1, "{root:?}");
+        assert!(root.certifies(exact), "{root:?}");
+    }
+    let blended = s
+        .shade(p, n, Threshold::relative(0.01).with_interpolation(2.0))
+        .unwrap();
+    assert!(blended.nodes_evaluated > 1, "{blended:?}");
+    assert!(blended.certifies(exact), "{blended:?}");
+    let budgeted = s
+        .shade(p, n, Threshold::relative(0.01).with_budget(150))
+        .unwrap();
+    assert!(
+        budgeted.nodes_evaluated > 1 && budgeted.cost() <= 150,
+        "{budgeted:?}"
+    );
+    assert!(budgeted.certifies(exact), "{budgeted:?}");
+
+    // A stack of coincident lights (one leaf, one light to the cut) makes
+    // the scene one the cut handles as before.
+    let mut stacked = lights.clone();
+    stacked.extend(std::iter::repeat_n(lights[0], 40));
+    let tree = LightTree::build(&stacked).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::ONE));
+    let r = s.shade(p, n, Threshold::relative(0.01)).unwrap();
+    assert!(r.nodes_evaluated > 1, "{r:?}");
+    assert!(r.certifies(s.exact(p, n).unwrap()), "{r:?}");
+}

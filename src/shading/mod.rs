@@ -48,6 +48,9 @@ pub use threshold::{Target, Threshold};
 pub struct Shading<'t, S: Shader> {
     tree: &'t LightTree,
     shader: S,
+    /// Whether the tree is a small scene, summed rather than cut where its
+    /// lights are known visible.
+    small_scene: bool,
     scratch: Scratch,
 }
 
@@ -68,6 +71,7 @@ impl LightTree {
         Shading {
             tree: self,
             shader,
+            small_scene: self.is_small_scene(),
             scratch: Scratch::default(),
         }
     }
@@ -99,6 +103,14 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// Shades one query: picks a cut through the tree with the paper's error
     /// list until `threshold` is met (or its budget runs out) and returns
     /// the radiance, its certified error bound and the work done.
+    ///
+    /// Where bounding costs more than summing, the cut sums: visible nodes
+    /// of at most 16 lights are summed light by light when they enter the
+    /// cut, and a tree of at most 256 lights (none of them coincident)
+    /// whose lights are known visible is summed whole when its root alone
+    /// does not meet the threshold (not with interpolation across levels,
+    /// whose blend needs bounded nodes, nor beyond the budget). Summed
+    /// lights carry no error.
     ///
     /// `visibility` is the host's ray tracer ([`Visibility`]); pass
     /// [`Unoccluded`] for none, or `&mut host` to keep the host.
@@ -173,6 +185,7 @@ impl<'t, S: Shader> Shading<'t, S> {
             &threshold,
             visibility,
         );
+        cut.small_scene = self.small_scene;
         let list = &mut self.scratch.list;
         let nesting = &mut self.scratch.nesting;
         let interpolating = threshold.interpolation().is_some();

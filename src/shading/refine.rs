@@ -11,7 +11,7 @@ use super::threshold::Threshold;
 use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, SUM_SLACK};
 use crate::shader::{NodeEstimate, SUM_LIGHTS_MAX, Shader};
-use crate::tree::{LightTree, NO_PLANE, Node};
+use crate::tree::{LightTree, NO_PLANE, Node, SMALL_SCENE_LIGHTS};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 
 /// One shading call's state: what it reads (tree, shader, the point), the
@@ -32,6 +32,9 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     /// sum (a target of 0, see [`Threshold::exact`]) rather than a few at a
     /// time ([`Shader::sum_lights`]).
     one_by_one: bool,
+    /// Whether the tree is a small scene, summed light by light rather than
+    /// cut (see [`Cut::sums_whole_scene`]); false unless the caller says.
+    pub(crate) small_scene: bool,
     pub(crate) visibility: V,
     /// Exact leaves and nodes that need no refinement.
     pub(crate) settled: CompensatedSum,
@@ -89,6 +92,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 EXACT_NODE_LIGHTS
             },
             one_by_one: threshold.is_exact(),
+            small_scene: false,
             visibility,
             settled: CompensatedSum::default(),
             nodes: 0,
@@ -204,6 +208,19 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             let tree = self.tree;
             let node = &tree.nodes[top.node as usize];
             let refining = top.seen != Seen::Unknown || self.gave_up_classifying();
+            if refining
+                && top.node == 0
+                && top.seen == Seen::Visible
+                && nesting.is_none()
+                && self.sums_whole_scene()
+            {
+                // A small scene known visible whose root alone does not
+                // meet the threshold: summed light by light, which costs
+                // less than cutting it (see `SMALL_SCENE_LIGHTS`).
+                list.pop_slot();
+                self.sum_lights(node.lights(), Seen::Visible, 1.0);
+                continue;
+            }
             if refining && !self.can_refine(node, top.seen == Seen::Visible) {
                 outcome.stop = Stop::Budget;
                 break;
@@ -450,6 +467,22 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             }
         }
         self.settled.add(value * weight);
+    }
+
+    /// Whether the whole scene is summed light by light when its root,
+    /// known visible, is refined: a small scene (see
+    /// [`SMALL_SCENE_LIGHTS`]), within the budget, no interpolation
+    /// (whose blend needs bounded nodes), and a target above 0 (with a
+    /// target of 0 the cut refines as usual, so that it adds the lights in
+    /// the order [`Shading::exact_query`](crate::Shading::exact_query)
+    /// does).
+    #[inline(always)]
+    fn sums_whole_scene(&self) -> bool {
+        debug_assert!(!self.small_scene || self.tree.nodes[0].light_count <= SMALL_SCENE_LIGHTS);
+        self.small_scene
+            && self.exact_lights > 0
+            && !self.one_by_one
+            && self.cost().saturating_add(self.tree.nodes[0].light_count) <= self.budget
     }
 
     /// Whether a visible node is summed light by light when it enters the
