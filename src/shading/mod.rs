@@ -105,7 +105,7 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// the radiance, its certified error bound and the work done.
     ///
     /// Where bounding costs more than summing, the cut sums: visible nodes
-    /// of at most 16 lights are summed light by light when they enter the
+    /// of at most 32 lights are summed light by light when they enter the
     /// cut, and a tree of at most 256 lights (none of them coincident)
     /// whose lights are known visible is summed whole when its root alone
     /// does not meet the threshold (not with interpolation across levels,

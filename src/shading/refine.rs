@@ -674,12 +674,17 @@ impl<F: FnMut(Entry)> Pending for F {
 
 /// Nodes of at most this many lights, known visible, are summed light by
 /// light when they enter the cut instead of bounded (without interpolation
-/// across levels, whose blend needs the bounded nodes to ramp through): a node bound costs
-/// about as much as evaluating 10 to 20 lights exactly, and an exact sum
-/// leaves no error to refine later. Measured on the street city at a
-/// certified 1%: 1.5x faster per point at 100 and 1,000 lights, 1.3x at
-/// 10^4 and 1.15x at 10^6 (8 and 32 do about as well).
-pub(crate) const EXACT_NODE_LIGHTS: u32 = 16;
+/// across levels, whose blend needs the bounded nodes to ramp through): a
+/// node bound costs about as much as summing a few tens of lights, and an
+/// exact sum leaves no error to refine later. Measured on the street city
+/// at a certified 1%, one point at a time: against bounding every node,
+/// summing nodes of at most 16 lights was 1.5x faster per point at 100 and
+/// 1,000 lights, 1.3x at 10^4 and 1.15x at 10^6; once the lights were
+/// summed four at a time in vector registers, 32 took 13.5 us per point at
+/// 10^5 lights against 15.7 with 16, 18.7 against 20.6 at 10^6, and the
+/// same within noise at 10^4 (8.5-8.7 us; medians of 9 alternating scratch
+/// runs; 48 and 64 did as well as 32, 128 worse).
+pub(crate) const EXACT_NODE_LIGHTS: u32 = 32;
 
 /// Partial answers for small nodes before the cut may judge classification
 /// useless (see [`Cut::gave_up_classifying`]).
