@@ -458,15 +458,31 @@ impl Lambert {
     /// as `(l0 + l1) + (l2 + l3)` and multiplied by `kd`.
     fn sum_group_baseline(&self, surface: &Surface, lights: &[PointLight]) -> DVec3 {
         let terms = LightTerms::new(surface);
-        let mut sums = [[0.0f64; 4]; 3];
-        let mut near = DVec3::ZERO;
+        let (mut sums, mut near) = ([[0.0f64; 4]; 3], DVec3::ZERO);
+        self.add_to_lanes(surface, &terms, lights, &mut sums, &mut near);
+        terms.total(self.kd, sums, near)
+    }
+
+    /// Adds `lights` to four lanes' sums, light `i` to lane `i % 4`, and
+    /// those whose height is not accepted through [`eval`](Shader::eval)
+    /// to `near`: the baseline's whole sum, the AVX2 copy's last short
+    /// chunk.
+    #[inline(always)]
+    fn add_to_lanes(
+        &self,
+        surface: &Surface,
+        terms: &LightTerms,
+        lights: &[PointLight],
+        sums: &mut [[f64; 4]; 3],
+        near: &mut DVec3,
+    ) {
         for (i, light) in lights.iter().enumerate() {
             let (weight, accepted) = terms.weight(light.position);
             for (sum, e) in sums.iter_mut().zip(light.intensity.to_array()) {
                 sum[i % 4] += f64::from(e) * weight;
             }
             if !accepted {
-                near += self.eval(
+                *near += self.eval(
                     &(),
                     surface,
                     light.position.as_dvec3(),
@@ -474,7 +490,6 @@ impl Lambert {
                 );
             }
         }
-        terms.total(self.kd, sums, near)
     }
 
     /// [`sum_group_baseline`](Self::sum_group_baseline) with AVX2 vector
@@ -576,20 +591,7 @@ impl Lambert {
             out
         };
         let mut sums = [lanes(r), lanes(g), lanes(b)];
-        for (i, light) in rest.iter().enumerate() {
-            let (weight, accepted) = terms.weight(light.position);
-            for (sum, e) in sums.iter_mut().zip(light.intensity.to_array()) {
-                sum[i] += f64::from(e) * weight;
-            }
-            if !accepted {
-                near += self.eval(
-                    &(),
-                    surface,
-                    light.position.as_dvec3(),
-                    light.intensity.as_dvec3(),
-                );
-            }
-        }
+        self.add_to_lanes(surface, &terms, rest, &mut sums, &mut near);
         terms.total(self.kd, sums, near)
     }
 
