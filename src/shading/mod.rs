@@ -184,8 +184,8 @@ impl<'t, S: Shader> Shading<'t, S> {
             point,
             &threshold,
             visibility,
+            self.small_scene,
         );
-        cut.small_scene = self.small_scene;
         let list = &mut self.scratch.list;
         let nesting = &mut self.scratch.nesting;
         let interpolating = threshold.interpolation().is_some();

@@ -33,8 +33,8 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     /// time ([`Shader::sum_lights`]).
     one_by_one: bool,
     /// Whether the tree is a small scene, summed light by light rather than
-    /// cut (see [`Cut::sums_whole_scene`]); false unless the caller says.
-    pub(crate) small_scene: bool,
+    /// cut (see [`Cut::sums_whole_scene`]).
+    small_scene: bool,
     pub(crate) visibility: V,
     /// Exact leaves and nodes that need no refinement.
     pub(crate) settled: CompensatedSum,
@@ -77,6 +77,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         point: Vec3,
         threshold: &Threshold,
         visibility: V,
+        small_scene: bool,
     ) -> Self {
         Self {
             tree,
@@ -92,7 +93,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 EXACT_NODE_LIGHTS
             },
             one_by_one: threshold.is_exact(),
-            small_scene: false,
+            small_scene,
             visibility,
             settled: CompensatedSum::default(),
             nodes: 0,
