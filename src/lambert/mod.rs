@@ -318,9 +318,10 @@ impl Shader for Lambert {
     }
 
     /// Four lights at a time side by side, with the very same operations
-    /// per light as [`eval`](Shader::eval) (lights within about a degree of
-    /// the tangent plane, whose height needs the compensated or exact dot
-    /// product, go through `eval` itself): the same results, bit for bit.
+    /// per light as [`eval`](Shader::eval) (lights within about 0.1 degree
+    /// of the tangent plane, whose height needs the compensated or exact
+    /// dot product, go through `eval` itself): the same results, bit for
+    /// bit.
     #[inline]
     fn eval_lights(&self, _: &(), surface: &Surface, lights: &[PointLight], out: &mut [DVec3]) {
         self.eval_group(surface, lights, out);
@@ -329,7 +330,7 @@ impl Shader for Lambert {
     /// Four lights at a time side by side, each lane summing its lights'
     /// `intensity * height / (|N| d^3)` where the height is positive (the
     /// terms of [`eval`](Shader::eval) before `kd`, the height accepted as
-    /// `eval` accepts it); lights within about a degree of the tangent
+    /// `eval` accepts it); lights within about 0.1 degree of the tangent
     /// plane go through `eval` itself.
     #[inline]
     fn sum_lights(&self, _: &(), surface: &Surface, lights: &[PointLight]) -> DVec3 {
@@ -505,10 +506,9 @@ impl Lambert {
             _mm256_set1_pd, _mm256_setzero_pd, _mm256_sqrt_pd, _mm256_sub_pd,
         };
         let terms = LightTerms::new(surface);
-        let normal = surface.given_normal.as_dvec3();
         let n2 = _mm256_set1_pd(terms.n2);
-        let [nx, ny, nz] = normal.to_array().map(|v| _mm256_set1_pd(v));
-        let [px, py, pz] = surface.point.to_array().map(|v| _mm256_set1_pd(v));
+        let [nx, ny, nz] = terms.normal.to_array().map(|v| _mm256_set1_pd(v));
+        let [px, py, pz] = terms.point.to_array().map(|v| _mm256_set1_pd(v));
         let accept = _mm256_set1_pd(NAIVE_DOT_ACCEPT);
         let sign = _mm256_set1_pd(-0.0);
         let zero = _mm256_setzero_pd();
