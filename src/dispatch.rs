@@ -12,7 +12,9 @@
 //! bits (the tests compare them). [`Lambert`](crate::Lambert)'s sum of a
 //! leaf's lights is written with AVX2 instructions themselves (the
 //! compiler's own vectors for it gathered the lights' coordinates one by
-//! one), the same operations lane by lane as its baseline copy.
+//! one), the same operations lane by lane as its baseline copy; so are the
+//! build's direct sums of a leaf's moments (the same fused multiply-adds,
+//! and the lanes' sums in the same order).
 
 /// Whether the processor has `$feature` (a literal), unless a test asked
 /// for the baseline copies on this thread.
@@ -49,6 +51,27 @@ pub(crate) fn avx2_fma() -> bool {
 #[inline]
 pub(crate) fn avx512f() -> bool {
     detected!("avx512f")
+}
+
+/// Lane `i` of an AVX2 vector of four `f64`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn lane_of(v: core::arch::x86_64::__m256d, i: usize) -> f64 {
+    use core::arch::x86_64::{
+        _mm_cvtsd_f64, _mm_unpackhi_pd, _mm256_castpd256_pd128, _mm256_extractf128_pd,
+    };
+    let half = if i < 2 {
+        _mm256_castpd256_pd128(v)
+    } else {
+        _mm256_extractf128_pd::<1>(v)
+    };
+    let half = if i.is_multiple_of(2) {
+        half
+    } else {
+        _mm_unpackhi_pd(half, half)
+    };
+    _mm_cvtsd_f64(half)
 }
 
 #[cfg(test)]

@@ -586,7 +586,7 @@ impl Lambert {
         let lanes = |v: __m256d| {
             let mut out = [0.0; 4];
             for (i, out) in out.iter_mut().enumerate() {
-                *out = lane_of(v, i);
+                *out = crate::dispatch::lane_of(v, i);
             }
             out
         };
@@ -718,27 +718,6 @@ impl LightTerms {
         let [r, g, b] = sums.map(|s| (s[0] + s[1]) + (s[2] + s[3]));
         kd * DVec3::new(r, g, b) + near
     }
-}
-
-/// Lane `i` of an AVX2 vector of four `f64`.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-fn lane_of(v: core::arch::x86_64::__m256d, i: usize) -> f64 {
-    use core::arch::x86_64::{
-        _mm_cvtsd_f64, _mm_unpackhi_pd, _mm256_castpd256_pd128, _mm256_extractf128_pd,
-    };
-    let half = if i < 2 {
-        _mm256_castpd256_pd128(v)
-    } else {
-        _mm256_extractf128_pd::<1>(v)
-    };
-    let half = if i.is_multiple_of(2) {
-        half
-    } else {
-        _mm_unpackhi_pd(half, half)
-    };
-    _mm_cvtsd_f64(half)
 }
 
 /// What every bound kind computes for `N` nodes seen from one point, one

@@ -6,7 +6,7 @@ use core::ops::{Add, Mul, Sub};
 use glam::{DVec3, Vec3};
 
 use super::layout::{LightTree, Node};
-use super::moments::{Moments, Statistics};
+use super::moments::{LeafScratch, Moments, Statistics};
 use super::morton;
 use super::pool::Pool;
 use crate::geometry::Aabb;
@@ -595,7 +595,13 @@ pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
     let path = || vec![Moments::ZERO; levels];
     if !pool.parallel() {
         let mut in_place = InPlace { nodes, done: &[] };
-        fill_moments(&mut in_place, lights, 0, &mut path());
+        fill_moments(
+            &mut in_place,
+            lights,
+            0,
+            &mut path(),
+            &mut LeafScratch::new(),
+        );
         return;
     }
     // Subtrees side by side, their statistics collected, then stored; then
@@ -610,7 +616,8 @@ pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
             out: Vec::new(),
         };
         let mut path = path();
-        fill_moments(&mut collect, lights, root as usize, &mut path);
+        let scratch = &mut LeafScratch::new();
+        fill_moments(&mut collect, lights, root as usize, &mut path, scratch);
         (root, path.swap_remove(0), collect.out)
     });
     let mut done = Vec::with_capacity(parts.len());
@@ -621,7 +628,14 @@ pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
         done.push((root, moments));
     }
     done.sort_unstable_by_key(|d| d.0);
-    fill_moments(&mut InPlace { nodes, done: &done }, lights, 0, &mut path());
+    let scratch = &mut LeafScratch::new();
+    fill_moments(
+        &mut InPlace { nodes, done: &done },
+        lights,
+        0,
+        &mut path(),
+        scratch,
+    );
 }
 
 /// The radius of `node`: its largest distance from its centroid to a
@@ -806,7 +820,7 @@ fn store(node: &mut Node, stats: Statistics) {
 /// moment statistics. `$recurse` is the function itself (one per compiled
 /// copy).
 macro_rules! fill_moments_body {
-    ($recurse:ident, $access:ident, $lights:ident, $index:ident, $path:ident) => {{
+    ($recurse:ident, $access:ident, $lights:ident, $index:ident, $path:ident, $scratch:ident) => {{
         let (out, below) = $path
             .split_first_mut()
             .expect("one buffer per level of the tree");
@@ -820,11 +834,11 @@ macro_rules! fill_moments_body {
         let (intensity, radius, count) = (node.intensity, node.radius, node.light_count);
         let (leaf, members, children) = (node.is_leaf(), node.lights(), node.children());
         if leaf {
-            out.set_to_lights(&$lights[members], c);
+            out.set_to_lights(&$lights[members], c, $scratch);
         } else {
             out.clear();
             for k in children {
-                $recurse($access, $lights, k, below);
+                $recurse($access, $lights, k, below, $scratch);
                 let t = $access.nodes()[k].centroid.as_dvec3() - c;
                 below[0].shift_into(t, out);
             }
@@ -844,17 +858,18 @@ fn fill_moments<A: Access>(
     lights: &[PointLight],
     index: usize,
     path: &mut [Moments],
+    scratch: &mut LeafScratch,
 ) {
     #[cfg(target_arch = "x86_64")]
     {
         if crate::dispatch::avx2_fma() {
             // SAFETY: the processor has AVX2 and FMA (`dispatch::avx2_fma`
             // checked).
-            unsafe { fill_moments_avx2(access, lights, index, path) };
+            unsafe { fill_moments_avx2(access, lights, index, path, scratch) };
             return;
         }
     }
-    fill_moments_baseline(access, lights, index, path);
+    fill_moments_baseline(access, lights, index, path, scratch);
 }
 
 /// [`fill_moments`] in the baseline build.
@@ -863,8 +878,9 @@ fn fill_moments_baseline<A: Access>(
     lights: &[PointLight],
     index: usize,
     path: &mut [Moments],
+    scratch: &mut LeafScratch,
 ) {
-    fill_moments_body!(fill_moments_baseline, access, lights, index, path)
+    fill_moments_body!(fill_moments_baseline, access, lights, index, path, scratch)
 }
 
 /// [`fill_moments`] compiled for AVX2 and FMA.
@@ -875,8 +891,9 @@ fn fill_moments_avx2<A: Access>(
     lights: &[PointLight],
     index: usize,
     path: &mut [Moments],
+    scratch: &mut LeafScratch,
 ) {
-    fill_moments_body!(fill_moments_avx2, access, lights, index, path)
+    fill_moments_body!(fill_moments_avx2, access, lights, index, path, scratch)
 }
 
 #[cfg(test)]
