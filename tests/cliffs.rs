@@ -15,7 +15,9 @@ fn stack(n: usize, at: Vec3) -> Vec<PointLight> {
 fn coincident_stack_costs_a_constant() {
     let at = Vec3::new(1.0, 2.0, 3.0);
     let mut costs = Vec::new();
-    for n in [10, 1_000, 200_000] {
+    // The smallest stack fits in a leaf by count (the default leaves hold
+    // up to 32 lights), the others only as coincident lights.
+    for n in [25, 1_000, 200_000] {
         let mut lights = stack(n, at);
         // A few other lights so that the stack is a leaf below the root.
         lights.extend((0..8).map(|i| PointLight::new(Vec3::new(i as f32, -5.0, 0.0), Vec3::ONE)));
@@ -53,20 +55,27 @@ fn exponentially_clustered_lights_leave_small_leaves() {
             lights.push(PointLight::new(Vec3::new(x, 0.0, 10.0) + jitter, Vec3::ONE));
         }
     }
+    // Leaves of distinct lights stay within `max_leaf_lights`: the
+    // default, 32, and a smaller one.
+    for (builder, most) in [
+        (LightTree::builder(), 32),
+        (LightTree::builder().max_leaf_lights(16), 16),
+    ] {
+        let tree = builder.build(&lights).unwrap();
+        tree.validate().unwrap();
+        let largest_leaf = tree
+            .nodes()
+            .iter()
+            .filter(|n| n.children().is_empty() && n.radius() > 0.0)
+            .map(|n| n.light_count())
+            .max()
+            .unwrap();
+        assert!(
+            largest_leaf <= most,
+            "a leaf holds {largest_leaf} distinct lights (at most {most})"
+        );
+    }
     let tree = LightTree::build(&lights).unwrap();
-    tree.validate().unwrap();
-    let largest_leaf = tree
-        .nodes()
-        .iter()
-        .filter(|n| n.children().is_empty() && n.radius() > 0.0)
-        .map(|n| n.light_count())
-        .max()
-        .unwrap();
-    // At most the default `max_leaf_lights`, 16.
-    assert!(
-        largest_leaf <= 16,
-        "a leaf holds {largest_leaf} distinct lights"
-    );
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     let p = Vec3::new(0.5, 12.0, -40.0);
     let r = s.shade(p, Vec3::Z, Threshold::relative(0.01)).unwrap();
