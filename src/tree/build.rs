@@ -131,10 +131,11 @@ impl TreeBuilder {
     /// its lights' moments (up to degree 5) once, and every other node
     /// shifts its children's moments to its own centroid, with a certified
     /// bound on the rounding carried along (see
-    /// [`Node::moment_error`](crate::Node::moment_error)). Only the radii
-    /// take a pass over each node's lights (`O(n * depth)` distance
-    /// checks, a few operations each), so that they stay tight. Memory
-    /// `O(n)`.
+    /// [`Node::moment_error`](crate::Node::moment_error)). The radii stay
+    /// exact (the farthest member, rounded up): a node looks for its
+    /// farthest member through its subtree, skipping the subtrees that
+    /// its children's radii show cannot hold it, so that it reads the
+    /// lights of a few leaves rather than all of its own. Memory `O(n)`.
     ///
     /// # Errors
     /// [`BuildError`] for a light with a non-finite or out-of-range
@@ -541,13 +542,14 @@ impl Shape {
 }
 
 /// Computes every node's statistics from the lights, in time linear in
-/// their number (plus `O(n * depth)` cheap distance checks for the radii),
-/// for a tree whose topology is set: children hold larger indices than
-/// their parent.
+/// their number (but for the radii's search through each node's subtree,
+/// which reads a few leaves per node), for a tree whose topology is set:
+/// children hold larger indices than their parent.
 ///
 /// 1. Intensities, weights, weighted positions and boxes, children before
 ///    parents (the sums of a node are its children's sums), then centroids.
-/// 2. Radii: the largest distance from the centroid to a member.
+/// 2. Radii: the largest distance from the centroid to a member, level by
+///    level from the deepest (see [`farthest_member`]).
 /// 3. Moments up to degree 5 (see [`Moments`]): summed directly over each
 ///    leaf's lights, shifted from the children's centroids to the parent's
 ///    for every other node, depth first so that only one path's moments
@@ -572,23 +574,7 @@ pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     fill_sums(nodes, lights, 0);
-    let radii = pool.cheap(lights.len());
-    if radii.parallel() {
-        radii.for_each_mut(nodes, |node| fill_radius(node, lights));
-    } else {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2_fma() {
-                // SAFETY: the processor has AVX2 and FMA
-                // (`dispatch::avx2_fma` checked).
-                unsafe { fill_radii_avx2(nodes, lights) };
-            } else {
-                nodes.iter_mut().for_each(|node| fill_radius(node, lights));
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        nodes.iter_mut().for_each(|node| fill_radius(node, lights));
-    }
+    fill_radii(nodes, lights, pool.cheap(lights.len()));
     // One buffer per level of a path.
     let levels = tree.depth as usize + 1;
     let path = || vec![Moments::ZERO; levels];
@@ -637,26 +623,123 @@ pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
     );
 }
 
-/// The radius of `node`: its largest distance from its centroid to a
-/// member, rounded up.
-#[inline(always)]
-fn fill_radius(node: &mut Node, lights: &[PointLight]) {
-    let c = node.centroid.as_dvec3();
-    let radius_sq = lights[node.lights()]
-        .iter()
-        .map(|l| (l.position.as_dvec3() - c).length_squared())
-        .fold(0.0f64, f64::max);
-    node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
+/// Every node's radius, its largest distance from its centroid to a
+/// member, rounded up: the nodes of each level after those of the level
+/// below (their children), the nodes of a level side by side on the pool.
+// Calling the AVX2 copy is one of the crate's unsafe blocks (see
+// `dispatch`).
+#[allow(unsafe_code)]
+fn fill_radii(nodes: &mut [Node], lights: &[PointLight], pool: Pool) {
+    // Breadth-first order: each level is a contiguous run of nodes, the
+    // next one running to the last child of its last parent.
+    let mut levels = vec![0, 1];
+    loop {
+        let (start, end) = (levels[levels.len() - 2], levels[levels.len() - 1]);
+        let next = nodes[start..end]
+            .iter()
+            .filter(|n| !n.is_leaf())
+            .map(|n| n.children().end)
+            .max();
+        match next {
+            Some(next) => levels.push(next),
+            None => break,
+        }
+    }
+    debug_assert_eq!(levels.last(), Some(&nodes.len()));
+    for level in levels.windows(2).rev() {
+        let (above, below) = nodes.split_at_mut(level[1]);
+        let (level_nodes, first_below) = (&mut above[level[0]..], level[1]);
+        let radius = |node: &mut Node| {
+            let mut stack = smallvec::SmallVec::new();
+            let radius_sq = farthest_member(node, lights, below, first_below, &mut stack);
+            node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
+        };
+        if pool.parallel() {
+            pool.for_each_mut(level_nodes, radius);
+            continue;
+        }
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::dispatch::avx2_fma() {
+                // SAFETY: the processor has AVX2 and FMA
+                // (`dispatch::avx2_fma` checked).
+                unsafe { fill_radii_avx2(level_nodes, &radius) };
+                continue;
+            }
+        }
+        level_nodes.iter_mut().for_each(radius);
+    }
 }
 
-/// [`fill_radius`] of every node, compiled for AVX2 and FMA (nothing to
-/// fuse: the same bits).
+/// `radius` of every node, compiled for AVX2 and FMA (nothing to fuse:
+/// the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn fill_radii_avx2(nodes: &mut [Node], lights: &[PointLight]) {
+fn fill_radii_avx2(nodes: &mut [Node], radius: &impl Fn(&mut Node)) {
     for node in nodes {
-        fill_radius(node, lights);
+        radius(node);
     }
+}
+
+/// The largest squared distance, as computed in `f64`, from `node`'s
+/// centroid to a member light: the same value as over all its lights, but
+/// subtrees that cannot hold a farther member are skipped. `below` holds
+/// the nodes from index `first_below` on, with their radii already set.
+///
+/// A member `x` of a subtree with centroid `c'`, stored radius `r'` (at
+/// least its members' exact distances) and box `B` lies within `|c' - c| +
+/// r'` of `c`, and no farther than `B`'s farthest corner; both computed in
+/// `f64` are within a few `2^-53` of their exact values, and so is the
+/// computed squared distance of `x` of the exact one. So a subtree whose
+/// `min((|c' - c| (1 + 2^-40) + r')^2, corner^2) (1 + 2^-40)` is below the
+/// largest computed value so far holds no larger one. Subtrees are taken
+/// farthest bound first, depth first.
+#[inline(always)]
+fn farthest_member(
+    node: &Node,
+    lights: &[PointLight],
+    below: &[Node],
+    first_below: usize,
+    stack: &mut smallvec::SmallVec<[(u32, f64); 64]>,
+) -> f64 {
+    const MARGIN: f64 = 1.0 + 1.0 / 1_099_511_627_776.0; // 1 + 2^-40
+    let c = node.centroid.as_dvec3();
+    let squared = |members: &[PointLight]| {
+        members
+            .iter()
+            .map(|l| (l.position.as_dvec3() - c).length_squared())
+            .fold(0.0f64, f64::max)
+    };
+    if node.is_leaf() {
+        return squared(&lights[node.lights()]);
+    }
+    let mut best = 0.0f64;
+    let push_children = |stack: &mut smallvec::SmallVec<[(u32, f64); 64]>, n: &Node| {
+        let start = stack.len();
+        for k in n.children() {
+            let child = &below[k - first_below];
+            let reach = (child.centroid.as_dvec3() - c).length() * MARGIN + f64::from(child.radius);
+            let (lo, hi) = (child.aabb.min.as_dvec3() - c, child.aabb.max.as_dvec3() - c);
+            let corner = (lo * lo).max(hi * hi).element_sum();
+            stack.push((k as u32, (reach * reach).min(corner) * MARGIN));
+        }
+        // The farthest bound on top.
+        stack[start..].sort_unstable_by(|a, b| a.1.total_cmp(&b.1));
+    };
+    stack.clear();
+    push_children(stack, node);
+    while let Some((k, bound)) = stack.pop() {
+        if bound < best {
+            continue;
+        }
+        let n = &below[k as usize - first_below];
+        if n.is_leaf() {
+            best = best.max(squared(&lights[n.lights()]));
+        } else {
+            push_children(stack, n);
+        }
+    }
+    best
 }
 
 /// Roots of about `parts` disjoint subtrees that hold every leaf: from the

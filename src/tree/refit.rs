@@ -14,7 +14,8 @@ impl LightTree {
     /// the tree was built with. Bounds stay certified after a refit (they are
     /// recomputed, not extrapolated); only their tightness depends on the
     /// lights having stayed near their groups. Time as for a build's
-    /// statistics: linear, plus the radii's `O(n * depth)` distance checks.
+    /// statistics: linear, but for the radii's search for each node's
+    /// farthest member.
     ///
     /// # Errors
     /// The same [`BuildError`]s as building, checked before anything changes;
