@@ -74,6 +74,28 @@ pub(crate) fn lane_of(v: core::arch::x86_64::__m256d, i: usize) -> f64 {
     _mm_cvtsd_f64(half)
 }
 
+/// Lane `i` of an AVX vector of eight `f32`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(crate) fn lane_of_ps(v: core::arch::x86_64::__m256, i: usize) -> f32 {
+    use core::arch::x86_64::{
+        _mm_cvtss_f32, _mm_shuffle_ps, _mm256_castps256_ps128, _mm256_extractf128_ps,
+    };
+    let half = if i < 4 {
+        _mm256_castps256_ps128(v)
+    } else {
+        _mm256_extractf128_ps::<1>(v)
+    };
+    let lane = match i % 4 {
+        0 => half,
+        1 => _mm_shuffle_ps::<1>(half, half),
+        2 => _mm_shuffle_ps::<2>(half, half),
+        _ => _mm_shuffle_ps::<3>(half, half),
+    };
+    _mm_cvtss_f32(lane)
+}
+
 #[cfg(test)]
 std::thread_local! {
     /// Set by tests on their own thread to run the baseline copies.

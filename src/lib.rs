@@ -103,7 +103,12 @@
 //! aims at; each point then bounds the whole rounding of its `f32` sum
 //! (the offsets, every operation, the lanes' sums; a few hundred `f32`
 //! ulps of the terms' magnitudes, summed beside them) and its bound
-//! includes it, so the contract is the same.
+//! includes it, so the contract is the same. In the same way the cut,
+//! for a relative target of at least `2^-12` without interpolation, sums
+//! small groups of visible lights with [`Shader::sum_lights_coarse`]
+//! ([`Lambert`] in `f32` lanes) and adds each group's certified rounding
+//! bound to its own, keeping a group's coarse sum only where that bound is
+//! at most a thirty-second of the target share of the sum.
 //!
 //! Where a term jumps, no allowance is needed, and none is widened: a
 //! single light's term is exactly 0 when the model's is (in the tangent

@@ -10,6 +10,14 @@ use crate::{PointLight, ShadeError};
 /// The most lights the cut passes to one [`Shader::sum_lights`] call.
 pub(crate) const SUM_LIGHTS_MAX: usize = 16;
 
+/// The most lights the cut passes to one call of
+/// [`Shader::sum_lights_coarse`].
+pub(crate) const COARSE_LIGHTS_MAX: usize = 64;
+
+/// The smallest relative target for which the cut uses
+/// [`Shader::sum_lights_coarse`]: `2^-12`, about `2.4e-4`.
+pub(crate) const COARSE_TARGET_MIN: f64 = 1.0 / 4096.0;
+
 /// A node's estimated contribution with a certified interval around it, per
 /// RGB channel.
 ///
@@ -167,6 +175,33 @@ pub trait Shader {
             }
         }
         sum
+    }
+
+    /// A cheaper sum of the model's terms for `lights`, known visible,
+    /// with a certified bound on its error: `Some((sum, error))` with
+    /// `|sum - exact| <= error` per channel, `exact` the exact sum of the
+    /// exact terms; or `None` where the shader has no such sum, or the
+    /// lights (or the point) fall outside the range it handles.
+    ///
+    /// The cut calls it, at most 64 lights a call, in place of
+    /// [`sum_lights`](Self::sum_lights) when the threshold is a relative
+    /// target of at least `2^-12` (about `2.4e-4`; without interpolation
+    /// across levels), and keeps a result only where its
+    /// `error` is at most `1/32` of the target times `sum`, channel by
+    /// channel; the errors join the reported bound, so they take at most
+    /// a thirty-second of the target. The default returns `None`.
+    /// [`Lambert`] sums in `f32`, eight lights side by side.
+    ///
+    /// [`Lambert`]: crate::Lambert
+    #[inline]
+    fn sum_lights_coarse(
+        &self,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        lights: &[PointLight],
+    ) -> Option<(DVec3, DVec3)> {
+        let _ = (point, surface, lights);
+        None
     }
 
     /// Bounds several nodes seen from one point: `out[i]` receives exactly

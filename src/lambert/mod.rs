@@ -2,6 +2,7 @@
 
 use glam::{DVec3, Vec3};
 
+mod coarse;
 mod series;
 
 use series::{Rgb, WidthInput, degree_two_lanes, rgb, series_width};
@@ -335,6 +336,30 @@ impl Shader for Lambert {
     #[inline]
     fn sum_lights(&self, _: &(), surface: &Surface, lights: &[PointLight]) -> DVec3 {
         self.sum_group(surface, lights)
+    }
+
+    /// In `f32`, eight lights side by side: within `32 * 2^-24` of `kd`
+    /// times `sum max_k I_k / d^2` over the lights (per channel), for
+    /// squared distances between `2^-60` and `2^60` and intensities up to
+    /// `2^40` (else `None`), at a point that is an `f32` value.
+    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
+    // `dispatch`).
+    #[allow(unsafe_code)]
+    #[inline]
+    fn sum_lights_coarse(
+        &self,
+        _: &(),
+        surface: &Surface,
+        lights: &[PointLight],
+    ) -> Option<(DVec3, DVec3)> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::dispatch::avx2() {
+                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+                return unsafe { coarse::sum_avx2(self.kd, surface, lights) };
+            }
+        }
+        coarse::sum_baseline(self.kd, surface, lights)
     }
 
     #[inline]

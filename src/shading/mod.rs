@@ -196,7 +196,10 @@ impl<'t, S: Shader> Shading<'t, S> {
             outcome.confirmed.unwrap_or_else(|| nesting.fold(list))
         } else {
             let (estimate, error) = list.resum();
-            (cut.settled.value() + estimate, reported_bound(error))
+            (
+                cut.settled.value() + estimate,
+                reported_bound(error + cut.settled_error),
+            )
         };
         if let (Some(band), Stop::ThresholdMet) = (threshold.interpolation(), outcome.stop) {
             let top = list.largest();

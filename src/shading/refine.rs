@@ -10,9 +10,10 @@ use super::result::Stop;
 use super::threshold::Threshold;
 use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, SUM_SLACK};
-use crate::shader::{NodeEstimate, SUM_LIGHTS_MAX, Shader};
+use crate::shader::{COARSE_LIGHTS_MAX, COARSE_TARGET_MIN, NodeEstimate, SUM_LIGHTS_MAX, Shader};
 use crate::tree::{LightTree, NO_PLANE, Node, SMALL_SCENE_LIGHTS};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
+use crate::{PointLight, Target};
 
 /// One shading call's state: what it reads (tree, shader, the point), the
 /// host it asks, and what it has settled and spent so far.
@@ -38,6 +39,13 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     pub(crate) visibility: V,
     /// Exact leaves and nodes that need no refinement.
     pub(crate) settled: CompensatedSum,
+    /// The certified error of what was settled by coarse sums of lights
+    /// ([`Shader::sum_lights_coarse`]).
+    pub(crate) settled_error: DVec3,
+    /// The share of a coarse sum its error may be for the sum to be kept
+    /// (`1/32` of a relative target), or `None` where coarse sums are not
+    /// used.
+    coarse: Option<f64>,
     pub(crate) nodes: u32,
     pub(crate) lights: u32,
     pub(crate) classify_queries: u32,
@@ -96,6 +104,17 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             small_scene,
             visibility,
             settled: CompensatedSum::default(),
+            settled_error: DVec3::ZERO,
+            coarse: match threshold.target() {
+                Target::Relative(t)
+                    if threshold.interpolation().is_none()
+                        && t >= COARSE_TARGET_MIN
+                        && t.is_finite() =>
+                {
+                    Some(t / 32.0)
+                }
+                _ => None,
+            },
             nodes: 0,
             lights: 0,
             classify_queries: 0,
@@ -186,7 +205,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 Some(n) => n.totals(),
                 None => {
                     let (estimate, error) = list.sums();
-                    (self.settled.value() + estimate, error)
+                    (self.settled.value() + estimate, error + self.settled_error)
                 }
             };
             if list.may_stop() && met(sums, largest, threshold) {
@@ -195,7 +214,10 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     Some(n) => n.fold(list),
                     None => {
                         let (estimate, error) = list.resum();
-                        (self.settled.value() + estimate, reported_bound(error))
+                        (
+                            self.settled.value() + estimate,
+                            reported_bound(error + self.settled_error),
+                        )
                     }
                 };
                 if threshold.met(sums.0, sums.1, largest) {
@@ -500,15 +522,25 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         const CHUNK: usize = SUM_LIGHTS_MAX;
         let tree = self.tree;
         if seen == Seen::Visible && !self.one_by_one {
-            // No host query: the lights' sum, a chunk at a time, each chunk
-            // a plain sum of non-negative terms (see `Shader::sum_lights`).
-            for lights in tree.lights[range].chunks(CHUNK) {
-                self.lights += lights.len() as u32;
-                let sum = self
-                    .shader
-                    .sum_lights(&self.per_point, self.surface, lights);
-                self.settled.add(sum * weight);
+            if let Some(share) = self.coarse {
+                // Coarse sums where their error is a small enough share of
+                // them, else the sums below.
+                for lights in tree.lights[range].chunks(COARSE_LIGHTS_MAX) {
+                    match self
+                        .shader
+                        .sum_lights_coarse(&self.per_point, self.surface, lights)
+                    {
+                        Some((sum, error)) if error.cmple(sum * share).all() => {
+                            self.lights += lights.len() as u32;
+                            self.settled.add(sum * weight);
+                            self.settled_error += error * weight;
+                        }
+                        _ => self.sum_visible(lights, weight),
+                    }
+                }
+                return;
             }
+            self.sum_visible(&tree.lights[range], weight);
             return;
         }
         let mut values = [DVec3::ZERO; CHUNK];
@@ -519,6 +551,20 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             for (light, value) in lights.iter().zip(values.iter()) {
                 self.settle_light(light.position, *value, seen, weight);
             }
+        }
+    }
+
+    /// The sum of `lights`, known visible, times `weight`, settled: a
+    /// chunk at a time, each chunk a plain sum of non-negative terms (see
+    /// [`Shader::sum_lights`]).
+    #[inline(always)]
+    fn sum_visible(&mut self, lights: &[PointLight], weight: f64) {
+        for lights in lights.chunks(SUM_LIGHTS_MAX) {
+            self.lights += lights.len() as u32;
+            let sum = self
+                .shader
+                .sum_lights(&self.per_point, self.surface, lights);
+            self.settled.add(sum * weight);
         }
     }
 
@@ -537,6 +583,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             self.sum_lights(node.lights(), seen(visible || V::ALWAYS_VISIBLE), weight);
         } else {
             let known = visible || V::ALWAYS_VISIBLE;
+            // Lights of children summed, not yet added: neighbouring
+            // children's lights are neighbours in the tree's order, and
+            // are summed together (up to a coarse sum's most), unless the
+            // lights are added one at a time.
+            let mut summing: Option<core::ops::Range<usize>> = None;
             // Children to bound go into `self.group`, bounded side by side
             // once all are known.
             for child in node.children() {
@@ -544,7 +595,21 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 if known && self.sums_exactly(c) {
                     // Summing a few visible lights costs less than bounding
                     // them (the budget counted them in `can_refine`).
-                    self.sum_lights(c.lights(), Seen::Visible, weight);
+                    let lights = c.lights();
+                    match &mut summing {
+                        Some(run)
+                            if !self.one_by_one
+                                && run.end == lights.start
+                                && lights.end - run.start <= COARSE_LIGHTS_MAX =>
+                        {
+                            run.end = lights.end;
+                        }
+                        _ => {
+                            if let Some(run) = summing.replace(lights) {
+                                self.sum_lights(run, Seen::Visible, weight);
+                            }
+                        }
+                    }
                     continue;
                 }
                 match self.enter(child, visible, weight) {
@@ -557,6 +622,9 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                         self.group.push(child as u32, cone);
                     }
                 }
+            }
+            if let Some(run) = summing {
+                self.sum_lights(run, Seen::Visible, weight);
             }
             self.bound_group(visible, weight, pending);
         }

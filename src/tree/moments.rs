@@ -979,7 +979,10 @@ mod tests {
                         "{count} lights, degree {l}: {diff} > 2 * {}",
                         moments.err[l][ch]
                     );
-                    assert!(moments.abs[l][ch] >= norms[l][ch], "{count} lights, degree {l}");
+                    assert!(
+                        moments.abs[l][ch] >= norms[l][ch],
+                        "{count} lights, degree {l}"
+                    );
                     assert!(moments.abs[l][ch] <= norms[l][ch] * (1.0 + 1e-12));
                 }
             }

@@ -1,0 +1,421 @@
+//! [`Lambert`]'s sum of visible lights in `f32`, eight lights side by side,
+//! with a certified bound on its error (see
+//! [`Shader::sum_lights_coarse`](crate::Shader::sum_lights_coarse)).
+//!
+//! # The rounding
+//!
+//! Write `u = 2^-24`, `D` for the exact distance from the point `p` to a
+//! light `l`, `n` for the unit normal and `I` for a channel's intensity. The
+//! point and the light are `f32` values, the unit normal is rounded to
+//! `f32` componentwise (within `u` of each component), and every operation
+//! below is correctly rounded, so to first order in `u` (the constants are
+//! rounded up past the second-order terms):
+//!
+//! * `d = l - p`, componentwise within `u |d_j|`;
+//! * the height `h = (n_x d_x + n_y d_y) + n_z d_z`: each product within
+//!   `3u` of `n_j d_j`, the two sums `2u` more of the magnitudes, so
+//!   within `5.001 u D` of the exact height (`sum_j |n_j d_j| <= D`);
+//! * `d2 = (d_x^2 + d_y^2) + d_z^2` within `5.001 u D^2`; `s = sqrt(d2)`
+//!   within `3.502 u D`; `q = d2 s` within `9.51 u D^3`;
+//! * `w = max(h / q, 0)`, the clamp being 1-Lipschitz: within `(5.001 +
+//!   9.51 + 1) u (1 + 10u) / D^2 <= 15.6 u / D^2` of the exact
+//!   `max(cos, 0) / D^2` (the height is at most `D`);
+//! * the term `I w` within `16.7 u I / D^2`;
+//! * a lane's sum of its terms, then the lanes' sums (three pairwise
+//!   levels): at most `m + 2` roundings for `m` terms a lane, at most
+//!   [`COARSE_MAX`]` / 8 + 2 = 10`, each within `u` of the sum of the
+//!   terms' magnitudes (at most `1.00001 I / D^2` each).
+//!
+//! So the sum is within `26.8 u E` of the exact sum, per channel, with `E =
+//! sum I / D^2` over the lights. The same lanes sum `e = max_k I_k (1 /
+//! d2)` (each within `7.003 u` of `max_k I_k / D^2`, all positive, then
+//! at most ten roundings), so the computed `E'` is at least `E (1 - 17.01
+//! u)`, and `27 u E'` bounds the error; [`ERROR_UNITS`] `= 32` leaves a
+//! margin. `kd` multiplies sum and bound in `f64`.
+//!
+//! Range: every lane must have `2^-60 <= d2 <= 2^60` and `max_k I_k <=
+//! 2^40`, or the sum returns `None` (the caller then sums in `f64`); then
+//! nothing overflows (a term is at most `2^100`, a sum of 64 at most
+//! `2^106`, `q` at most `2^90`). Underflow moves a product by at most
+//! `2^-150` (sums of subnormal values are exact): at most `2^-126 I` of
+//! `I w` against the `2^-80 I` the relative bound allows at the largest
+//! distance, except for the product `I w` itself and the envelope's `e`,
+//! so the bound adds `2^-140` per light (times `kd`).
+
+use glam::{DVec3, Vec3};
+
+use crate::PointLight;
+use crate::geometry::Surface;
+
+/// The most lights one call sums (eight a lane at most, see the module
+/// docs).
+pub(crate) const COARSE_MAX: usize = 64;
+
+/// Lanes summed side by side.
+const LANES: usize = 8;
+
+/// The bound, in units of `2^-24` times the computed envelope.
+const ERROR_UNITS: f64 = 32.0;
+
+/// `2^-24`.
+const U: f64 = 1.0 / 16_777_216.0;
+
+/// Absolute allowance per light for underflow (module docs).
+const UNDERFLOW: f64 = 7.174_648_137_343_064e-43; // 2^-140
+
+/// The range every lane must be in (module docs).
+const D2_MIN: f32 = 1.0 / 1_152_921_504_606_846_976.0; // 2^-60
+const D2_MAX: f32 = 1_152_921_504_606_846_976.0; // 2^60
+const INTENSITY_MAX: f32 = 1_099_511_627_776.0; // 2^40
+
+/// Per lane: the three channels' sums, the envelope's, and whether every
+/// light so far was in range.
+struct Sums {
+    rgb: [[f32; LANES]; 3],
+    envelope: [f32; LANES],
+    in_range: bool,
+}
+
+/// The point and the unit normal in `f32`, or `None` when the point is not
+/// an `f32` value.
+struct Frame {
+    point: Vec3,
+    normal: Vec3,
+}
+
+impl Frame {
+    #[inline(always)]
+    fn new(surface: &Surface) -> Option<Self> {
+        let point = surface.point.as_vec3();
+        let n = surface.given_normal.as_dvec3();
+        let normal = (n / n.length()).as_vec3();
+        (point.as_dvec3() == surface.point && normal.is_finite()).then_some(Self { point, normal })
+    }
+
+    /// One light's operations, added to lane `lane`: the same, operation by
+    /// operation, as one lane of the AVX2 copy.
+    #[inline(always)]
+    fn add(&self, light: &PointLight, lane: usize, sums: &mut Sums) {
+        let d = light.position - self.point;
+        let n = self.normal;
+        let h = (n.x * d.x + n.y * d.y) + n.z * d.z;
+        let d2 = (d.x * d.x + d.y * d.y) + d.z * d.z;
+        let q = d2 * d2.sqrt();
+        let r = h / q;
+        let w = if r > 0.0 { r } else { 0.0 };
+        let i = light.intensity;
+        let largest = max(max(i.x, i.y), i.z);
+        for (sum, i) in sums.rgb.iter_mut().zip(i.to_array()) {
+            sum[lane] += i * w;
+        }
+        sums.envelope[lane] += largest * (1.0 / d2);
+        sums.in_range &= (D2_MIN..=D2_MAX).contains(&d2) && largest <= INTENSITY_MAX;
+    }
+
+    /// `kd` times the lanes' sums, each added as `((l0 + l1) + (l2 + l3)) +
+    /// ((l4 + l5) + (l6 + l7))`, and the bound (module docs), or `None`
+    /// out of range.
+    #[inline(always)]
+    fn total(sums: &Sums, kd: DVec3, lights: usize) -> Option<(DVec3, DVec3)> {
+        if !sums.in_range {
+            return None;
+        }
+        let add =
+            |s: &[f32; LANES]| ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
+        Self::finish(
+            sums.rgb.each_ref().map(add),
+            add(&sums.envelope),
+            kd,
+            lights,
+        )
+    }
+
+    /// `kd` times the summed channels, and the bound from the summed
+    /// envelope (module docs).
+    #[inline(always)]
+    fn finish(rgb: [f32; 3], envelope: f32, kd: DVec3, lights: usize) -> Option<(DVec3, DVec3)> {
+        let [r, g, b] = rgb.map(f64::from);
+        let error =
+            (ERROR_UNITS * U * f64::from(envelope) + lights as f64 * UNDERFLOW) * (1.0 + 1e-12);
+        // With `kd`'s products' own rounding (`2^-53` relative).
+        let sum = kd * DVec3::new(r, g, b);
+        Some((sum, kd * error * (1.0 + 1e-12) + sum * 1e-15))
+    }
+}
+
+/// `a` if it is larger, else `b` (the AVX2 instruction's order).
+#[inline(always)]
+fn max(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// The sum and its bound (module docs), light `i` in lane `i % 8`; `None`
+/// for more than [`COARSE_MAX`] lights, a point that is not an `f32`
+/// value, or lights out of range.
+pub(crate) fn sum_baseline(
+    kd: DVec3,
+    surface: &Surface,
+    lights: &[PointLight],
+) -> Option<(DVec3, DVec3)> {
+    if lights.len() > COARSE_MAX {
+        return None;
+    }
+    let frame = Frame::new(surface)?;
+    let mut sums = Sums {
+        rgb: [[0.0; LANES]; 3],
+        envelope: [0.0; LANES],
+        in_range: true,
+    };
+    for (i, light) in lights.iter().enumerate() {
+        frame.add(light, i % LANES, &mut sums);
+    }
+    Frame::total(&sums, kd, lights.len())
+}
+
+/// [`sum_baseline`] with AVX2 instructions for the full chunks of eight:
+/// the same operations lane by lane (no fused multiply-add), so the same
+/// bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) fn sum_avx2(
+    kd: DVec3,
+    surface: &Surface,
+    lights: &[PointLight],
+) -> Option<(DVec3, DVec3)> {
+    use core::arch::x86_64::{
+        __m128, __m256, _CMP_GE_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _mm_add_ps, _mm_set_ps, _mm256_add_ps,
+        _mm256_and_ps, _mm256_andnot_ps, _mm256_castps128_ps256, _mm256_castps256_ps128,
+        _mm256_cmp_ps, _mm256_div_ps, _mm256_extractf128_ps, _mm256_hadd_ps, _mm256_max_ps,
+        _mm256_movemask_ps, _mm256_mul_ps, _mm256_or_ps, _mm256_set_m128, _mm256_set1_ps,
+        _mm256_setr_ps, _mm256_setzero_ps, _mm256_shuffle_ps, _mm256_sqrt_ps, _mm256_sub_ps,
+        _mm256_unpackhi_ps, _mm256_unpacklo_ps,
+    };
+    if lights.len() > COARSE_MAX {
+        return None;
+    }
+    let frame = Frame::new(surface)?;
+    let [px, py, pz] = frame.point.to_array().map(|v| _mm256_set1_ps(v));
+    let [nx, ny, nz] = frame.normal.to_array().map(|v| _mm256_set1_ps(v));
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let (d2_min, d2_max) = (_mm256_set1_ps(D2_MIN), _mm256_set1_ps(D2_MAX));
+    let intensity_max = _mm256_set1_ps(INTENSITY_MAX);
+    let (mut r, mut g, mut b, mut e) = (zero, zero, zero, zero);
+    let all = _mm256_cmp_ps::<_CMP_LE_OQ>(zero, zero);
+    let mut in_range = all;
+    // Eight lights' terms, added to the lanes that `mask` keeps.
+    let mut add = |chunk: &[PointLight], mask: __m256| {
+        // (x, y, z, red) of lights k and k + 4 in one vector's halves,
+        // transposed in each half to one vector per coordinate.
+        let row =
+            |l: &PointLight| _mm_set_ps(l.intensity.x, l.position.z, l.position.y, l.position.x);
+        let pair = |k: usize| _mm256_set_m128(row(&chunk[k + 4]), row(&chunk[k]));
+        let (a, b_, c, d) = (pair(0), pair(1), pair(2), pair(3));
+        let (t0, t1) = (_mm256_unpacklo_ps(a, b_), _mm256_unpackhi_ps(a, b_));
+        let (t2, t3) = (_mm256_unpacklo_ps(c, d), _mm256_unpackhi_ps(c, d));
+        let x = _mm256_shuffle_ps::<0x44>(t0, t2);
+        let y = _mm256_shuffle_ps::<0xEE>(t0, t2);
+        let z = _mm256_shuffle_ps::<0x44>(t1, t3);
+        let red = _mm256_shuffle_ps::<0xEE>(t1, t3);
+        // (green, blue) of lights k and k + 1, and k + 4 and k + 5.
+        let duo = |k: usize| -> __m128 {
+            let (l, m) = (&chunk[k], &chunk[k + 1]);
+            _mm_set_ps(m.intensity.z, m.intensity.y, l.intensity.z, l.intensity.y)
+        };
+        let gb01 = _mm256_set_m128(duo(4), duo(0));
+        let gb23 = _mm256_set_m128(duo(6), duo(2));
+        let green = _mm256_shuffle_ps::<0x88>(gb01, gb23);
+        let blue = _mm256_shuffle_ps::<0xDD>(gb01, gb23);
+        let (dx, dy, dz) = (
+            _mm256_sub_ps(x, px),
+            _mm256_sub_ps(y, py),
+            _mm256_sub_ps(z, pz),
+        );
+        let h = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
+            _mm256_mul_ps(nz, dz),
+        );
+        let d2 = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+            _mm256_mul_ps(dz, dz),
+        );
+        let q = _mm256_mul_ps(d2, _mm256_sqrt_ps(d2));
+        let w = _mm256_max_ps(_mm256_div_ps(h, q), zero);
+        let largest = _mm256_max_ps(_mm256_max_ps(red, green), blue);
+        let kept = |v: __m256| _mm256_and_ps(v, mask);
+        r = _mm256_add_ps(r, kept(_mm256_mul_ps(red, w)));
+        g = _mm256_add_ps(g, kept(_mm256_mul_ps(green, w)));
+        b = _mm256_add_ps(b, kept(_mm256_mul_ps(blue, w)));
+        e = _mm256_add_ps(e, kept(_mm256_mul_ps(largest, _mm256_div_ps(one, d2))));
+        let ok = _mm256_and_ps(
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(d2, d2_min),
+                _mm256_cmp_ps::<_CMP_LE_OQ>(d2, d2_max),
+            ),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(largest, intensity_max),
+        );
+        // Lanes left out count as in range.
+        in_range = _mm256_and_ps(in_range, _mm256_or_ps(ok, _mm256_andnot_ps(mask, all)));
+    };
+    let chunks = lights.chunks_exact(LANES);
+    let rest = chunks.remainder();
+    for chunk in chunks {
+        add(chunk, all);
+    }
+    if let Some(first) = rest.first() {
+        // The last lights in lanes 0 onwards; the other lanes repeat the
+        // first of them and are left out (their terms cleared to +0, which
+        // adds nothing).
+        let mut padded = [*first; LANES];
+        padded[..rest.len()].copy_from_slice(rest);
+        let mask = _mm256_cmp_ps::<_CMP_LT_OQ>(
+            _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
+            _mm256_set1_ps(rest.len() as f32),
+        );
+        add(&padded, mask);
+    }
+    if _mm256_movemask_ps(in_range) != 0xff {
+        return None;
+    }
+    // Per vector, its lanes added as ((l0 + l1) + (l2 + l3)) + ((l4 + l5)
+    // + (l6 + l7)), the four vectors side by side.
+    let pairs = _mm256_hadd_ps(_mm256_hadd_ps(r, g), _mm256_hadd_ps(b, e));
+    let sums = _mm_add_ps(
+        _mm256_castps256_ps128(pairs),
+        _mm256_extractf128_ps::<1>(pairs),
+    );
+    let lane = |i: usize| crate::dispatch::lane_of_ps(_mm256_castps128_ps256(sums), i);
+    Frame::finish([lane(0), lane(1), lane(2)], lane(3), kd, lights.len())
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DVec3, Vec3};
+
+    use super::{COARSE_MAX, U, sum_baseline};
+    use crate::dispatch::baseline;
+    use crate::geometry::Surface;
+    use crate::{Lambert, PointLight, Shader};
+
+    /// Both copies, which must agree bit for bit.
+    fn coarse(
+        lambert: &Lambert,
+        surface: &Surface,
+        lights: &[PointLight],
+    ) -> Option<(DVec3, DVec3)> {
+        let sum = lambert.sum_lights_coarse(&(), surface, lights);
+        let base = baseline(|| lambert.sum_lights_coarse(&(), surface, lights));
+        assert_eq!(
+            sum.map(|(s, e)| (
+                s.to_array().map(f64::to_bits),
+                e.to_array().map(f64::to_bits)
+            )),
+            base.map(|(s, e)| (
+                s.to_array().map(f64::to_bits),
+                e.to_array().map(f64::to_bits)
+            )),
+        );
+        sum
+    }
+
+    /// The coarse sum against the compensated sum of `eval` (within
+    /// `2^-40` relative of the exact terms) over 0 to 64 lights, above,
+    /// below, in and a hair off the tangent plane, dark and bright: within
+    /// its bound, the bound within `33 * 2^-24 kd sum max_k I_k / d^2`,
+    /// and the AVX2 copy the same bits as the baseline.
+    #[test]
+    fn coarse_sums_stay_within_their_bounds() {
+        let mut state = 29u64;
+        let mut uniform = move || crate::testing::uniform(&mut state);
+        let lambert = Lambert::new(Vec3::new(0.9, 0.5, 0.25));
+        let mut worst = 0.0f64;
+        for round in 0..1300 {
+            let p = Vec3::new(uniform() * 8.0, uniform() * 8.0, uniform() * 2.0);
+            let normal = Vec3::new(uniform() - 0.5, uniform() - 0.5, 1.0) * (0.1 + 3.0 * uniform());
+            let surface = Surface::new(p, normal, None).unwrap();
+            let count = round % (COARSE_MAX + 1);
+            let lights: Vec<PointLight> = (0..count)
+                .map(|i| {
+                    let offset =
+                        Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5) * 20.0;
+                    let n = normal.normalize();
+                    let flat = offset - n * offset.dot(n);
+                    let position = match (round + i) % 5 {
+                        0 => p + flat,
+                        1 => p + flat + n * (i as f32 - 3.0) * 1e-6,
+                        _ => p + offset,
+                    };
+                    let dark = (round + i) % 7 == 0;
+                    let i = Vec3::new(uniform(), uniform() * 4.0, uniform() * 0.1);
+                    PointLight::new(position, if dark { Vec3::ZERO } else { i * 100.0 })
+                })
+                .collect();
+            let Some((sum, error)) = coarse(&lambert, &surface, &lights) else {
+                // Only a light on the point itself is out of range here.
+                assert!(
+                    lights
+                        .iter()
+                        .any(|l| (l.position - p).length_squared() < 1e-12)
+                );
+                continue;
+            };
+            let mut exact = crate::numeric::CompensatedSum::default();
+            let mut envelope = 0.0;
+            for light in &lights {
+                let (x, i) = (light.position.as_dvec3(), light.intensity.as_dvec3());
+                exact.add(lambert.eval(&(), &surface, x, i));
+                envelope += i.max_element() / (x - surface.point).length_squared();
+            }
+            let exact = exact.value();
+            let kd = Vec3::new(0.9, 0.5, 0.25).as_dvec3();
+            for k in 0..3 {
+                let off = (sum[k] - exact[k]).abs();
+                assert!(
+                    off <= error[k] + 1e-12 * exact[k],
+                    "round {round}, {count} lights: {sum} against {exact}, bound {error}"
+                );
+                assert!(
+                    error[k] <= 33.0 * U * kd[k] * envelope * (1.0 + 1e-6) + 1e-15 * sum[k] + 1e-30
+                );
+                if error[k] > 0.0 {
+                    worst = worst.max(off / error[k]);
+                }
+            }
+        }
+        assert!(worst > 0.0, "no sum was off at all");
+    }
+
+    /// Out of range: a light on the point, squared distances beyond
+    /// `2^60`, intensities beyond `2^40`, more than 64 lights, a point that
+    /// is not an `f32` value; in range at the edges.
+    #[test]
+    fn coarse_sums_refuse_what_they_cannot_bound() {
+        let lambert = Lambert::new(Vec3::ONE);
+        let surface = Surface::new(Vec3::new(1.0, 2.0, 3.0), Vec3::Z, None).unwrap();
+        let above = |h: f32, i: f32| PointLight::new(Vec3::new(1.0, 2.0, 3.0 + h), Vec3::splat(i));
+        assert!(coarse(&lambert, &surface, &[above(1.0, 1.0), above(0.0, 1.0)]).is_none());
+        assert!(
+            coarse(
+                &lambert,
+                &surface,
+                &[above(1.0, 1.0), above(2f32.powi(31), 1.0)]
+            )
+            .is_none()
+        );
+        assert!(coarse(&lambert, &surface, &[above(2f32.powi(29), 1.0)]).is_some());
+        // Near the point: at the origin, where tiny offsets are exact.
+        let origin = Surface::new(Vec3::ZERO, Vec3::Z, None).unwrap();
+        let near = |h: f32| PointLight::new(Vec3::new(0.0, 0.0, h), Vec3::ONE);
+        assert!(coarse(&lambert, &origin, &[near(1.0), near(2f32.powi(-31))]).is_none());
+        assert!(coarse(&lambert, &origin, &[near(2f32.powi(-29))]).is_some());
+        assert!(coarse(&lambert, &surface, &[above(1.0, 2f32.powi(41))]).is_none());
+        assert!(coarse(&lambert, &surface, &[above(1.0, 2f32.powi(40))]).is_some());
+        assert!(coarse(&lambert, &surface, &vec![above(1.0, 1.0); COARSE_MAX + 1]).is_none());
+        let full = coarse(&lambert, &surface, &vec![above(1.0, 1.0); COARSE_MAX]).unwrap();
+        assert_eq!(full.0, DVec3::splat(COARSE_MAX as f64));
+        let mut moved = surface;
+        moved.point.x += 1e-12;
+        assert!(sum_baseline(DVec3::ONE, &moved, &[above(1.0, 1.0)]).is_none());
+        assert!(coarse(&lambert, &moved, &[above(1.0, 1.0)]).is_none());
+    }
+}
