@@ -155,3 +155,35 @@ fn a_small_scene_is_summed_light_by_light() {
     assert!(r.nodes_evaluated > 1, "{r:?}");
     assert!(r.certifies(s.exact(p, n).unwrap()), "{r:?}");
 }
+
+/// A scene of a few hundred lights (more than 256, at most 512) is summed
+/// whole only where its lights are summed coarsely (a relative target of
+/// at least `2^-12`), since a coarse sum costs a fraction of an `f64` one;
+/// below that target the cut bounds nodes.
+#[test]
+fn a_few_hundred_lights_are_summed_whole_where_the_sums_are_coarse() {
+    let lights: Vec<PointLight> = (0..400)
+        .map(|i| {
+            let (x, y) = ((i % 20) as f32, (i / 20) as f32);
+            PointLight::new(
+                Vec3::new(x, y, 3.0 + (i % 3) as f32),
+                Vec3::new(1.0, 0.5, 0.25),
+            )
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::ONE));
+    let (p, n) = (Vec3::new(-24.0, 9.5, 0.0), Vec3::X);
+    assert!(tree.root().unwrap().cone(p.as_dvec3()).is_some());
+    let exact = s.exact(p, n).unwrap();
+    let coarse = s.shade(p, n, Threshold::relative(0.01)).unwrap();
+    assert_eq!(
+        (coarse.nodes_evaluated, coarse.lights_evaluated),
+        (1, 400),
+        "{coarse:?}"
+    );
+    assert!(coarse.certifies(exact), "{coarse:?}");
+    let fine = s.shade(p, n, Threshold::relative(1e-4)).unwrap();
+    assert!(fine.nodes_evaluated > 1, "{fine:?}");
+    assert!(fine.certifies(exact), "{fine:?}");
+}

@@ -11,7 +11,7 @@ use super::threshold::Threshold;
 use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, SUM_SLACK};
 use crate::shader::{COARSE_LIGHTS_MAX, COARSE_TARGET_MIN, NodeEstimate, SUM_LIGHTS_MAX, Shader};
-use crate::tree::{LightTree, NO_PLANE, Node, SMALL_SCENE_LIGHTS};
+use crate::tree::{LightTree, NO_PLANE, Node, SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 use crate::{PointLight, Target};
 
@@ -494,15 +494,21 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
 
     /// Whether the whole scene is summed light by light when its root,
     /// known visible, is refined: a small scene (see
-    /// [`SMALL_SCENE_LIGHTS`]), within the budget, no interpolation
+    /// [`SMALL_SCENE_LIGHTS`], or [`SMALL_SCENE_LIGHTS_COARSE`] where the
+    /// lights are summed coarsely), within the budget, no interpolation
     /// (whose blend needs bounded nodes), and a target above 0 (with a
     /// target of 0 the cut refines as usual, so that it adds the lights in
     /// the order [`Shading::exact_query`](crate::Shading::exact_query)
     /// does).
     #[inline(always)]
     fn sums_whole_scene(&self) -> bool {
-        debug_assert!(!self.small_scene || self.tree.nodes[0].light_count <= SMALL_SCENE_LIGHTS);
+        let most = if self.coarse.is_some() {
+            SMALL_SCENE_LIGHTS_COARSE
+        } else {
+            SMALL_SCENE_LIGHTS
+        };
         self.small_scene
+            && self.tree.nodes[0].light_count <= most
             && self.exact_lights > 0
             && !self.one_by_one
             && self.cost().saturating_add(self.tree.nodes[0].light_count) <= self.budget
