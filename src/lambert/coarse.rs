@@ -6,8 +6,9 @@
 //!
 //! Write `u = 2^-24`, `D` for the exact distance from the point `p` to a
 //! light `l`, `n` for the unit normal and `I` for a channel's intensity. The
-//! point and the light are `f32` values, the unit normal is rounded to
-//! `f32` componentwise (within `u` of each component), and every operation
+//! point and the light are `f32` values, the unit normal (the surface's,
+//! within a few `f64` ulps) is rounded to `f32` componentwise (within
+//! `1.0001 u` of each component), and every operation
 //! below is correctly rounded, so to first order in `u` (the constants are
 //! rounded up past the second-order terms):
 //!
@@ -87,8 +88,8 @@ impl Frame {
     #[inline(always)]
     fn new(surface: &Surface) -> Option<Self> {
         let point = surface.point.as_vec3();
-        let n = surface.given_normal.as_dvec3();
-        let normal = (n / n.length()).as_vec3();
+        // The unit normal in `f64` (within a few of its ulps), rounded.
+        let normal = surface.normal.as_vec3();
         (point.as_dvec3() == surface.point && normal.is_finite()).then_some(Self { point, normal })
     }
 
