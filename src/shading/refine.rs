@@ -602,10 +602,14 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     // Summing a few visible lights costs less than bounding
                     // them (the budget counted them in `can_refine`).
                     let lights = c.lights();
+                    if self.one_by_one {
+                        // In the children's order, as `exact_query` adds.
+                        self.sum_lights(lights, Seen::Visible, weight);
+                        continue;
+                    }
                     match &mut summing {
                         Some(run)
-                            if !self.one_by_one
-                                && run.end == lights.start
+                            if run.end == lights.start
                                 && lights.end - run.start <= COARSE_LIGHTS_MAX =>
                         {
                             run.end = lights.end;
