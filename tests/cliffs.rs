@@ -88,6 +88,19 @@ fn exponentially_clustered_lights_leave_small_leaves() {
     );
 }
 
+/// `count` lights in rows of 20, one unit apart, 3 to 5 units up.
+fn rows_of_lights(count: usize) -> Vec<PointLight> {
+    (0..count)
+        .map(|i| {
+            let (x, y) = ((i % 20) as f32, (i / 20) as f32);
+            PointLight::new(
+                Vec3::new(x, y, 3.0 + (i % 3) as f32),
+                Vec3::new(1.0, 0.5, 0.25),
+            )
+        })
+        .collect()
+}
+
 /// A small scene is summed light by light rather than cut, where its lights
 /// are known visible: the root's bound, then every light, with no error
 /// (or, with coarse sums, their rounding's small bound). A
@@ -96,15 +109,7 @@ fn exponentially_clustered_lights_leave_small_leaves() {
 /// bounds nodes as before.
 #[test]
 fn a_small_scene_is_summed_light_by_light() {
-    let lights: Vec<PointLight> = (0..200)
-        .map(|i| {
-            let (x, y) = ((i % 20) as f32, (i / 20) as f32);
-            PointLight::new(
-                Vec3::new(x, y, 3.0 + (i % 3) as f32),
-                Vec3::new(1.0, 0.5, 0.25),
-            )
-        })
-        .collect();
+    let lights = rows_of_lights(200);
     let tree = LightTree::build(&lights).unwrap();
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     // Beside the lights, outside the root's ball, facing them.
@@ -162,15 +167,7 @@ fn a_small_scene_is_summed_light_by_light() {
 /// below that target the cut bounds nodes.
 #[test]
 fn a_few_hundred_lights_are_summed_whole_where_the_sums_are_coarse() {
-    let lights: Vec<PointLight> = (0..400)
-        .map(|i| {
-            let (x, y) = ((i % 20) as f32, (i / 20) as f32);
-            PointLight::new(
-                Vec3::new(x, y, 3.0 + (i % 3) as f32),
-                Vec3::new(1.0, 0.5, 0.25),
-            )
-        })
-        .collect();
+    let lights = rows_of_lights(400);
     let tree = LightTree::build(&lights).unwrap();
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     let (p, n) = (Vec3::new(-24.0, 9.5, 0.0), Vec3::X);
