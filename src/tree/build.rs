@@ -650,8 +650,7 @@ fn fill_radii(nodes: &mut [Node], lights: &[PointLight], pool: Pool) {
         let (above, below) = nodes.split_at_mut(level[1]);
         let (level_nodes, first_below) = (&mut above[level[0]..], level[1]);
         let radius = |node: &mut Node| {
-            let mut stack = smallvec::SmallVec::new();
-            let radius_sq = farthest_member(node, lights, below, first_below, &mut stack);
+            let radius_sq = farthest_member(node, lights, below, first_below);
             node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
         };
         if pool.parallel() {
@@ -695,13 +694,7 @@ fn fill_radii_avx2(nodes: &mut [Node], radius: &impl Fn(&mut Node)) {
 /// largest computed value so far holds no larger one. Subtrees are taken
 /// farthest bound first, depth first.
 #[inline(always)]
-fn farthest_member(
-    node: &Node,
-    lights: &[PointLight],
-    below: &[Node],
-    first_below: usize,
-    stack: &mut smallvec::SmallVec<[(u32, f64); 64]>,
-) -> f64 {
+fn farthest_member(node: &Node, lights: &[PointLight], below: &[Node], first_below: usize) -> f64 {
     const MARGIN: f64 = 1.0 + 1.0 / 1_099_511_627_776.0; // 1 + 2^-40
     let c = node.centroid.as_dvec3();
     let squared = |members: &[PointLight]| {
@@ -714,7 +707,10 @@ fn farthest_member(
         return squared(&lights[node.lights()]);
     }
     let mut best = 0.0f64;
-    let push_children = |stack: &mut smallvec::SmallVec<[(u32, f64); 64]>, n: &Node| {
+    // Subtrees still to search, with the bounds of their members' squared
+    // distances.
+    type Stack = smallvec::SmallVec<[(u32, f64); 64]>;
+    let push_children = |stack: &mut Stack, n: &Node| {
         let start = stack.len();
         for k in n.children() {
             let child = &below[k - first_below];
@@ -726,8 +722,8 @@ fn farthest_member(
         // The farthest bound on top.
         stack[start..].sort_unstable_by(|a, b| a.1.total_cmp(&b.1));
     };
-    stack.clear();
-    push_children(stack, node);
+    let mut stack = Stack::new();
+    push_children(&mut stack, node);
     while let Some((k, bound)) = stack.pop() {
         if bound < best {
             continue;
@@ -736,7 +732,7 @@ fn farthest_member(
         if n.is_leaf() {
             best = best.max(squared(&lights[n.lights()]));
         } else {
-            push_children(stack, n);
+            push_children(&mut stack, n);
         }
     }
     best

@@ -433,7 +433,7 @@ impl Moments {
         scratch: &mut LeafScratch,
     ) {
         const BLOCK: usize = BLOCK_CHUNKS * LIGHT_LANES;
-        let blocks = lights.len().div_ceil(BLOCK).max(1);
+        let blocks = lights.len().div_ceil(BLOCK);
         for (k, block) in lights.chunks(BLOCK).enumerate() {
             let (terms, carry) = scratch.block(block, centre);
             self.sum_block(terms, carry, k == 0, k + 1 == blocks);
