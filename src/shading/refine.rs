@@ -139,6 +139,10 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// [`EXACT_NODE_LIGHTS`]).
     #[inline(always)]
     pub(crate) fn can_refine(&self, node: &Node, visible: bool) -> bool {
+        if self.budget == u32::MAX {
+            // No budget: every cost fits (the sum below saturates at it).
+            return true;
+        }
         let cost = if node.is_leaf() {
             node.light_count
         } else if visible || V::ALWAYS_VISIBLE {

@@ -318,6 +318,9 @@ impl LightTree {
     /// that the loads overlap the work instead of stalling it.
     #[inline]
     pub(crate) fn prefetch_refinement(&self, index: usize) {
+        if self.nodes.len() < PREFETCH_MIN_NODES {
+            return;
+        }
         let Some(node) = self.nodes.get(index) else {
             return;
         };
@@ -337,6 +340,11 @@ fn as_bytes_range<T>(items: &[T]) -> core::ops::Range<usize> {
     let start = items.as_ptr() as usize;
     start..start + core::mem::size_of_val(items)
 }
+
+/// Trees of fewer nodes are not prefetched: they stay in the cache from
+/// one shading point to the next, where a prefetch only costs its
+/// instructions.
+const PREFETCH_MIN_NODES: usize = 2048;
 
 /// Cache lines prefetched at most per call.
 const PREFETCH_LINES: usize = 16;
