@@ -246,6 +246,191 @@ impl<const N: usize> Sub for Vec3Lanes<N> {
     }
 }
 
+/// A number lanes are written over: `f64` or `f32`, every operation the
+/// IEEE one (correctly rounded, never fused).
+pub(crate) trait Real:
+    Copy
+    + Default
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+{
+    /// Whether sums in this type carry their rounding envelope (`f32`).
+    const ROUNDED: bool;
+    /// A constant, rounded to nearest (exact for the small constants and
+    /// powers of two the crate writes).
+    fn of(x: f64) -> Self;
+    /// From an `f32` (exact in both).
+    fn from_f32(x: f32) -> Self;
+    fn sqrt(self) -> Self;
+    fn abs(self) -> Self;
+    fn widen(self) -> f64;
+}
+
+impl Real for f64 {
+    const ROUNDED: bool = false;
+    #[inline(always)]
+    fn of(x: f64) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn from_f32(x: f32) -> Self {
+        f64::from(x)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f64::sqrt(self)
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        f64::abs(self)
+    }
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        self
+    }
+}
+
+impl Real for f32 {
+    const ROUNDED: bool = true;
+    #[inline(always)]
+    fn of(x: f64) -> Self {
+        x as f32
+    }
+    #[inline(always)]
+    fn from_f32(x: f32) -> Self {
+        x
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        f32::sqrt(self)
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        f32::abs(self)
+    }
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        f64::from(self)
+    }
+}
+
+/// `N` values of a [`Real`], operated on lane by lane (four or eight `f32`
+/// lanes fill one SSE or AVX2 vector): the children of a node bounded
+/// together. Every operation is the scalar one per lane, so a lane's result
+/// is the same bits in every compiled copy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Wide<T, const N: usize>(pub(crate) [T; N]);
+
+impl<T: Real, const N: usize> Wide<T, N> {
+    /// The same value in every lane.
+    #[inline(always)]
+    pub(crate) fn splat(x: T) -> Self {
+        Self([x; N])
+    }
+
+    /// The constant `x` in every lane.
+    #[inline(always)]
+    pub(crate) fn of(x: f64) -> Self {
+        Self::splat(T::of(x))
+    }
+
+    /// A row of `f32` values.
+    #[inline(always)]
+    pub(crate) fn from_f32(row: &[f32; N]) -> Self {
+        Self(array(T::default(), |i| T::from_f32(row[i])))
+    }
+
+    /// Each lane widened to `f64`.
+    #[inline(always)]
+    pub(crate) fn widen(self) -> Wide<f64, N> {
+        Wide(array(0.0, |i| self.0[i].widen()))
+    }
+
+    #[inline(always)]
+    fn map(self, f: impl Fn(T) -> T) -> Self {
+        Self(array(T::default(), |i| f(self.0[i])))
+    }
+
+    #[inline(always)]
+    fn zip(self, b: Self, f: impl Fn(T, T) -> T) -> Self {
+        Self(array(T::default(), |i| f(self.0[i], b.0[i])))
+    }
+
+    /// Per lane `if a < b { a } else { b }` (`b` if either is NaN).
+    #[inline(always)]
+    pub(crate) fn min(self, b: Self) -> Self {
+        self.zip(b, |a, b| if a < b { a } else { b })
+    }
+
+    /// Per lane `if a > b { a } else { b }` (`b` if either is NaN).
+    #[inline(always)]
+    pub(crate) fn max(self, b: Self) -> Self {
+        self.zip(b, |a, b| if a > b { a } else { b })
+    }
+
+    #[inline(always)]
+    pub(crate) fn abs(self) -> Self {
+        self.map(T::abs)
+    }
+
+    #[inline(always)]
+    pub(crate) fn sqrt(self) -> Self {
+        self.map(T::sqrt)
+    }
+
+    /// Per lane `if a >= b { x } else { y }`.
+    #[inline(always)]
+    pub(crate) fn select_ge(a: Self, b: Self, x: Self, y: Self) -> Self {
+        Self(array(T::default(), |i| {
+            if a.0[i] >= b.0[i] { x.0[i] } else { y.0[i] }
+        }))
+    }
+}
+
+macro_rules! wide_binary {
+    ($trait:ident, $method:ident, $op:tt) => {
+        impl<T: Real, const N: usize> $trait for Wide<T, N> {
+            type Output = Self;
+            #[inline(always)]
+            fn $method(self, b: Self) -> Self {
+                self.zip(b, |a, b| a $op b)
+            }
+        }
+    };
+}
+
+wide_binary!(Add, add, +);
+wide_binary!(Sub, sub, -);
+wide_binary!(Mul, mul, *);
+wide_binary!(Div, div, /);
+
+impl<T: Real, const N: usize> Neg for Wide<T, N> {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        self.map(|a| -a)
+    }
+}
+
+impl<T: Real, const N: usize> AddAssign for Wide<T, N> {
+    #[inline(always)]
+    fn add_assign(&mut self, b: Self) {
+        *self = *self + b;
+    }
+}
+
+impl<T: Real, const N: usize> MulAssign for Wide<T, N> {
+    #[inline(always)]
+    fn mul_assign(&mut self, b: Self) {
+        *self = *self * b;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::Lanes;

@@ -4,7 +4,7 @@
 use glam::{DVec3, Vec3};
 
 use crate::geometry::{Cone, Surface};
-use crate::tree::Node;
+use crate::tree::{LightTree, Node};
 use crate::{PointLight, ShadeError};
 
 /// The most lights the cut passes to one [`Shader::sum_lights`] call.
@@ -204,6 +204,43 @@ pub trait Shader {
         None
     }
 
+    /// Bounds the children of node `parent` of `tree` together, coarsely:
+    /// for each child `first_child + i` whose bit `i` is set in `wanted`,
+    /// `out[i]` receives `Some` of a certified bound of the child (as
+    /// [`bound`](Self::bound) gives, but computed in single precision,
+    /// each end at most about `2^-13` of the child's `I kd / (D - R)^2`
+    /// wider),
+    /// or `None` where the child's ball comes too near the point for a
+    /// finite bound (within [`Cone::MIN_CLEARANCE`], relatively, as
+    /// [`Cone::new`] decides); the other entries of `out` are left alone. Returns `false`, setting nothing, where the
+    /// shader has no such bound (the default), for a leaf or an index out
+    /// of range, and for a point that is not an `f32` value; the caller
+    /// then bounds each child with [`bound_nodes`](Self::bound_nodes).
+    ///
+    /// The cut calls it with the children it would bound, in place of
+    /// [`bound_nodes`](Self::bound_nodes), when the threshold is a
+    /// relative target of at least `2^-12` (about `2.4e-4`; without
+    /// interpolation across levels), where its coarser rounding is a
+    /// negligible part of the target. [`Lambert`] with its default
+    /// [`BoundKind::Series`](crate::BoundKind::Series) bounds the children
+    /// side by side in one vector of eight `f32` lanes; a sum of shaders
+    /// ([`Combined`]) does where both of its terms do.
+    ///
+    /// [`Lambert`]: crate::Lambert
+    #[inline]
+    fn bound_children_coarse(
+        &self,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        tree: &LightTree,
+        parent: usize,
+        wanted: u8,
+        out: &mut [Option<NodeEstimate>],
+    ) -> bool {
+        let _ = (point, surface, tree, parent, wanted, out);
+        false
+    }
+
     /// Bounds several nodes seen from one point: `out[i]` receives exactly
     /// what [`bound`](Self::bound) gives for `nodes[i]` under `cones[i]`
     /// (the three slices have the same length; past the shortest, entries
@@ -328,6 +365,46 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
     }
 
     /// Diffuse when both terms are: the albedos add.
+    /// Both terms' coarse bounds, added child by child (`None` where
+    /// either gives none); `false` unless both terms have them.
+    #[inline]
+    fn bound_children_coarse(
+        &self,
+        p: &Self::PerPoint,
+        s: &Surface,
+        tree: &LightTree,
+        parent: usize,
+        wanted: u8,
+        out: &mut [Option<NodeEstimate>],
+    ) -> bool {
+        let mut second = [None; crate::tree::MAX_CHILDREN];
+        let len = out.len().min(second.len());
+        // The second term first, into scratch, so that `out` is left alone
+        // if either term has no coarse bounds.
+        if !self
+            .second
+            .bound_children_coarse(&p.1, s, tree, parent, wanted, &mut second[..len])
+            || !self
+                .first
+                .bound_children_coarse(&p.0, s, tree, parent, wanted, &mut out[..len])
+        {
+            return false;
+        }
+        for (i, (a, b)) in out.iter_mut().zip(second).enumerate() {
+            if wanted & (1 << i) != 0 {
+                *a = match (*a, b) {
+                    (Some(a), Some(b)) => Some(NodeEstimate {
+                        estimate: a.estimate + b.estimate,
+                        lower: a.lower + b.lower,
+                        upper: a.upper + b.upper,
+                    }),
+                    _ => None,
+                };
+            }
+        }
+        true
+    }
+
     #[inline]
     fn diffuse_albedo(&self) -> Option<DVec3> {
         Some(self.first.diffuse_albedo()? + self.second.diffuse_albedo()?)

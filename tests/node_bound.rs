@@ -16,7 +16,9 @@ mod common;
 
 use common::cases;
 use glam::{DVec3, Vec3};
-use manylights::{BoundKind, Lambert, LightTree, PointLight, ShadeResult, Shader, Surface};
+use manylights::{
+    BoundKind, Lambert, LightTree, NodeEstimate, PointLight, ShadeResult, Shader, Surface,
+};
 use proptest::prelude::*;
 
 /// A unit vector, uniform on the sphere.
@@ -276,6 +278,11 @@ fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<boo
     let shader = Lambert::new(kd).with_bound(kind);
     let bound = shader.bound(&(), &surface, node, &cone);
     let exact = exact(&shader, &surface, tree, index);
+    // A coarse bound is only given by the series bound.
+    if kind != BoundKind::Series {
+        let mut out = [None; 8];
+        prop_assert!(!shader.bound_children_coarse(&(), &surface, tree, 0, 1, &mut out));
+    }
     for k in 0..3 {
         let allowance = ShadeResult::ROUNDING_ALLOWANCE * exact[k];
         prop_assert!(
@@ -298,7 +305,75 @@ fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<boo
         );
         prop_assert!(bound.error()[k].is_finite(), "error not finite: {bound:?}");
     }
+    if kind == BoundKind::Series {
+        check_coarse(tree, index, &surface, &shader, &bound, exact)?;
+    }
     Ok(true)
+}
+
+/// The coarse bound of node `index` (through its parent's
+/// `bound_children_coarse`, alone and among all its siblings) contains the
+/// exact sum, and is at most `2^-12` of the node's `I kd / (D - R)^2` wider
+/// than the `f64` bound at either end.
+fn check_coarse(
+    tree: &LightTree,
+    index: usize,
+    surface: &Surface,
+    shader: &Lambert,
+    f64_bound: &NodeEstimate,
+    exact: DVec3,
+) -> Result<(), TestCaseError> {
+    let Some(parent) = tree
+        .nodes()
+        .iter()
+        .position(|n| n.children().contains(&index))
+    else {
+        return Ok(());
+    };
+    let lane = index - tree.nodes()[parent].children().start;
+    let node = &tree.nodes()[index];
+    let siblings = tree.nodes()[parent].children().len();
+    for wanted in [1u8 << lane, ((1u16 << siblings) - 1) as u8] {
+        let mut out = [Some(NodeEstimate::ZERO); 8];
+        prop_assert!(shader.bound_children_coarse(&(), surface, tree, parent, wanted, &mut out));
+        let Some(bound) = out[lane] else {
+            // No finite bound: exactly where the f64 bound has none.
+            prop_assert!(false, "no coarse bound where the cone exists");
+            continue;
+        };
+        let d = (node.centroid().as_dvec3() - surface.point).length();
+        let near = (d - f64::from(node.radius())).max(0.0);
+        let scale = node.intensity() * shader.kd() / (near * near);
+        for k in 0..3 {
+            let allowance = ShadeResult::ROUNDING_ALLOWANCE * exact[k];
+            prop_assert!(
+                bound.lower[k] <= exact[k] + allowance && exact[k] <= bound.upper[k] + allowance,
+                "coarse channel {k}: exact {:e} outside [{:e}, {:e}] (node {index}, \
+                 D/R - 1 = {:e}, f64 bound [{:e}, {:e}])",
+                exact[k],
+                bound.lower[k],
+                bound.upper[k],
+                d / f64::from(node.radius()) - 1.0,
+                f64_bound.lower[k],
+                f64_bound.upper[k],
+            );
+            prop_assert!(
+                bound.lower[k] <= bound.estimate[k] && bound.estimate[k] <= bound.upper[k]
+            );
+            let slack = scale[k] / 4096.0;
+            prop_assert!(
+                bound.upper[k] <= f64_bound.upper[k] + slack
+                    && bound.lower[k] >= f64_bound.lower[k] - slack,
+                "coarse channel {k}: [{:e}, {:e}] much wider than [{:e}, {:e}] (scale {:e})",
+                bound.lower[k],
+                bound.upper[k],
+                f64_bound.lower[k],
+                f64_bound.upper[k],
+                scale[k]
+            );
+        }
+    }
+    Ok(())
 }
 
 proptest! {
@@ -462,6 +537,22 @@ proptest! {
                 bound.lower[k] <= exact[k] + allowance && exact[k] <= bound.upper[k] + allowance,
                 "exact {:e} outside [{:e}, {:e}]", exact[k], bound.lower[k], bound.upper[k]
             );
+        }
+        // The same pair as one child of a root (a third light far behind
+        // the point, leaves of two lights), bounded coarsely.
+        let mut three = lights.to_vec();
+        three.push(PointLight::new((point.as_dvec3() * 2.0 - c * 1e3).as_vec3(), Vec3::ONE));
+        let tree = LightTree::builder().max_leaf_lights(2).build(&three).unwrap();
+        if let Some(pair) = tree.nodes().iter().position(|n| {
+            n.light_count() == 2 && tree.lights()[n.lights()].iter().all(|l| l.position != three[2].position)
+        }) && pair != 0
+        {
+            let node = &tree.nodes()[pair];
+            if let Some(cone) = node.cone(surface.point) {
+                let bound = shader.bound(&(), &surface, node, &cone);
+                let sum = self::exact(&shader, &surface, &tree, pair);
+                check_coarse(&tree, pair, &surface, &shader, &bound, sum)?;
+            }
         }
     }
 }

@@ -3,6 +3,7 @@
 use glam::{DVec3, Vec3};
 
 mod coarse;
+mod group;
 mod series;
 
 use series::{Rgb, WidthInput, degree_two_lanes, rgb, series_width};
@@ -14,7 +15,8 @@ use crate::numeric::{
     COS_SLACK, NAIVE_DOT_ACCEPT, SECOND_ORDER_SLACK, SERIES_SLACK, dot_of_difference,
 };
 use crate::shader::{NodeEstimate, Shader, ViewIndependent, colour_or_clamped, try_colour};
-use crate::tree::Node;
+use crate::tree::groups::{Block, Group};
+use crate::tree::{LightTree, Node};
 use crate::{PointLight, ShadeError};
 
 /// Which node bound a shader uses.
@@ -362,6 +364,53 @@ impl Shader for Lambert {
         coarse::sum_baseline(self.kd, surface, lights)
     }
 
+    /// With [`BoundKind::Series`], the children side by side in `f32`
+    /// lanes (see the `group` module's rounding analysis), each scaled by
+    /// `I_k kd_k / D^2` in `f64`; children too far or too near for `f32`
+    /// (squared distances outside `[2^-120, 2^120]`, or a ball within
+    /// `2^-6 D` of the point) go through [`bound`](Shader::bound), and a
+    /// box reaching the tangent plane is tested exactly, as there.
+    #[inline]
+    fn bound_children_coarse(
+        &self,
+        _: &(),
+        surface: &Surface,
+        tree: &LightTree,
+        parent: usize,
+        wanted: u8,
+        out: &mut [Option<NodeEstimate>],
+    ) -> bool {
+        if self.kind != BoundKind::Series {
+            return false;
+        }
+        let Some(node) = tree.nodes().get(parent) else {
+            return false;
+        };
+        let Some(group) = tree.groups.children(parent, node) else {
+            return false;
+        };
+        let p = surface.point.as_vec3();
+        if p.as_dvec3() != surface.point {
+            return false;
+        }
+        let at = group::PointView {
+            p: p.to_array(),
+            n: surface.normal.as_vec3().to_array(),
+        };
+        let children = &tree.nodes()[node.children()];
+        match group {
+            Group::Four(block) => {
+                let lanes = group_bounds_four(block, &at, &self.scales(children));
+                self.fill_children(surface, children, wanted, &lanes, out);
+            }
+            Group::Eight(block) => {
+                let lanes = group_bounds_eight(block, &at, &self.scales(children));
+                self.fill_children(surface, children, wanted, &lanes, out);
+            }
+        }
+        true
+    }
+
     #[inline]
     fn bound(&self, _: &(), surface: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
         let mut out = [NodeEstimate::ZERO];
@@ -698,6 +747,123 @@ impl Lambert {
             *out = estimate;
         }
     }
+}
+
+impl Lambert {
+    /// What the group kernel reads of the children besides their block:
+    /// `I_k kd_k` and the build's rounding bound of their moments; lanes
+    /// past the children repeat the last child, as the block does.
+    #[inline(always)]
+    fn scales<const N: usize>(&self, children: &[Node]) -> group::LaneScales<N> {
+        let last = children.len().max(1) - 1;
+        let mut scales = group::LaneScales {
+            intensity: [[0.0; N]; 3],
+            moment_error: [0.0; N],
+        };
+        for i in 0..N {
+            let Some(child) = children.get(i.min(last)) else {
+                break;
+            };
+            let scale = child.intensity * self.kd;
+            for k in 0..3 {
+                scales.intensity[k][i] = scale[k];
+            }
+            scales.moment_error[i] = child.moment_error();
+        }
+        scales
+    }
+
+    /// The wanted children's results from their lanes (see
+    /// [`Shader::bound_children_coarse`]).
+    #[inline(always)]
+    fn fill_children<const N: usize>(
+        &self,
+        surface: &Surface,
+        children: &[Node],
+        wanted: u8,
+        lanes: &group::LaneBounds<N>,
+        out: &mut [Option<NodeEstimate>],
+    ) {
+        for (i, (child, out)) in children.iter().zip(out.iter_mut()).enumerate() {
+            if wanted & (1 << i) == 0 {
+                continue;
+            }
+            *out = match lanes.state(i) {
+                group::Lane::Fallback => child
+                    .cone(surface.point)
+                    .map(|cone| self.bound(&(), surface, child, &cone)),
+                group::Lane::Dark => Some(NodeEstimate::ZERO),
+                group::Lane::Reaching
+                    if child
+                        .aabb
+                        .lies_at_or_below(surface.point, surface.given_normal) =>
+                {
+                    Some(NodeEstimate::ZERO)
+                }
+                group::Lane::Reaching | group::Lane::Bounded => {
+                    let lane = |v: &[[f64; N]; 3]| DVec3::new(v[0][i], v[1][i], v[2][i]);
+                    Some(NodeEstimate {
+                        estimate: lane(&lanes.estimate),
+                        lower: lane(&lanes.lower),
+                        upper: lane(&lanes.upper),
+                    })
+                }
+            };
+        }
+    }
+}
+
+/// A block of four lanes' bounds ([`group::lane_bounds`]): on `x86_64`
+/// processors with AVX2, in a copy compiled for AVX2 (the same bits, see
+/// [`dispatch`](crate::dispatch)). Out of line, compiled once.
+// Calling the AVX2 copy is one of the crate's unsafe blocks (see
+// `dispatch`).
+#[allow(unsafe_code)]
+#[inline(never)]
+fn group_bounds_four(
+    block: &Block<4>,
+    at: &group::PointView<f32>,
+    scales: &group::LaneScales<4>,
+) -> group::LaneBounds<4> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if crate::dispatch::avx2() {
+            // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+            return unsafe { group_bounds_avx2(block, at, scales) };
+        }
+    }
+    group::lane_bounds(block, at, scales)
+}
+
+/// [`group_bounds_four`] for blocks of eight lanes.
+// Calling the AVX2 copy is one of the crate's unsafe blocks (see
+// `dispatch`).
+#[allow(unsafe_code)]
+#[inline(never)]
+fn group_bounds_eight(
+    block: &Block<8>,
+    at: &group::PointView<f32>,
+    scales: &group::LaneScales<8>,
+) -> group::LaneBounds<8> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if crate::dispatch::avx2() {
+            // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+            return unsafe { group_bounds_avx2(block, at, scales) };
+        }
+    }
+    group::lane_bounds(block, at, scales)
+}
+
+/// [`group::lane_bounds`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn group_bounds_avx2<const N: usize>(
+    block: &Block<N>,
+    at: &group::PointView<f32>,
+    scales: &group::LaneScales<N>,
+) -> group::LaneBounds<N> {
+    group::lane_bounds(block, at, scales)
 }
 
 /// What [`Lambert`]'s sum of lights needs of the shading point, and one

@@ -670,14 +670,13 @@ fn expand<S: Shader, V: Visibility>(
             let it = &items[next];
             (it.node, it.visible, it.key, it.frame)
         };
-        let node = cut.tree.nodes[node as usize];
-        if !cut.can_refine(&node, visible) {
+        if !cut.can_refine(&cut.tree.nodes[node as usize], visible) {
             return false;
         }
         let parent = next as u32;
         let outer = std::mem::take(&mut cut.settled);
         let magnitude = &mut nesting.fixed_magnitude;
-        cut.refine(&node, visible, 1.0, &mut |mut e: Entry| {
+        cut.refine(node as usize, visible, 1.0, &mut |mut e: Entry| {
             e.key = e.key.min(key);
             if ramp.alpha(e.key) > 0.0 {
                 items.push(item(&e, parent, frame));

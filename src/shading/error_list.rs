@@ -129,6 +129,10 @@ pub(crate) struct ErrorList {
     base: i64,
     /// Buckets up to `top` may be non-empty; none above.
     top: usize,
+    /// One bit per bucket, set while the bucket holds an entry: the highest
+    /// non-empty bucket is found a word at a time, not a bucket at a time
+    /// (keys of one cut span tens of octaves, hundreds of buckets).
+    occupied: [u64; BUCKETS / 64],
     /// The range of buckets touched since the last clear.
     touched: (usize, usize),
     /// Slots of the waiting entries of classes other than `Error`.
@@ -159,6 +163,7 @@ impl Default for ErrorList {
             heads: Box::default(),
             base: 0,
             top: 0,
+            occupied: [0; BUCKETS / 64],
             touched: (BUCKETS, 0),
             special: Vec::new(),
             best: None,
@@ -190,6 +195,7 @@ impl ErrorList {
         let (lo, hi) = self.touched;
         if lo <= hi {
             self.heads[lo..=hi].fill(NONE);
+            self.occupied[lo / 64..=hi / 64].fill(0);
         }
         self.touched = (BUCKETS, 0);
         self.top = 0;
@@ -240,6 +246,7 @@ impl ErrorList {
             let b = self.bucket(e.key);
             self.next.push(self.heads[b]);
             self.heads[b] = slot;
+            self.occupied[b / 64] |= 1 << (b % 64);
             self.top = self.top.max(b);
             self.touched = (self.touched.0.min(b), self.touched.1.max(b));
             // A new entry at the head of the best one's bucket changes the
@@ -277,8 +284,20 @@ impl ErrorList {
         if self.waiting == 0 {
             return None;
         }
-        while self.heads[self.top] == NONE {
-            self.top -= 1;
+        if self.heads[self.top] == NONE {
+            // The highest occupied bucket below: some entry is waiting, so
+            // some bit is set.
+            let mut word = self.top / 64;
+            let mut bits = self.occupied[word] & (u64::MAX >> (63 - self.top % 64));
+            while bits == 0 && word > 0 {
+                word -= 1;
+                bits = self.occupied[word];
+            }
+            if bits == 0 {
+                debug_assert!(false, "a waiting entry but no occupied bucket");
+                return None;
+            }
+            self.top = word * 64 + 63 - bits.leading_zeros() as usize;
         }
         let mut slot = self.heads[self.top];
         let (mut best, mut best_prev, mut best_key) = (slot, NONE, self.keys[slot as usize]);
@@ -317,6 +336,9 @@ impl ErrorList {
             let next = self.next[slot as usize];
             if prev == NONE {
                 self.heads[bucket] = next;
+                if next == NONE {
+                    self.occupied[bucket / 64] &= !(1 << (bucket % 64));
+                }
             } else {
                 self.next[prev as usize] = next;
             }

@@ -48,10 +48,9 @@
 //! its value (the rounding of `1/D` included), and times `1 + 2^-16` it is
 //! an upper bound. Its bound grows by `1.002 u` times that.
 
-use core::ops::{Add, AddAssign, Div, Mul, Sub};
-
 use glam::{DVec3, Vec3};
 
+use crate::lanes::Real;
 use crate::tree::Node;
 
 /// `f64` entries summed side by side.
@@ -87,57 +86,6 @@ const MAX_REACH: f64 = 1_099_511_627_776.0; // 2^40
 
 /// The largest coordinate, in the scaled frame, for the `f32` sum.
 const MAX_COORDINATE: f64 = 1.267_650_600_228_229_4e30; // 2^100
-
-/// A number the sums are written over: `f64` or `f32`, every operation
-/// the IEEE one (correctly rounded, never fused).
-trait Real:
-    Copy
-    + Default
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + AddAssign
-{
-    /// Whether sums in this type carry their rounding envelope.
-    const ROUNDED: bool;
-    /// A small constant (exact in both).
-    fn of(x: f64) -> Self;
-    fn sqrt(self) -> Self;
-    fn widen(self) -> f64;
-}
-
-impl Real for f64 {
-    const ROUNDED: bool = false;
-    #[inline(always)]
-    fn of(x: f64) -> Self {
-        x
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        f64::sqrt(self)
-    }
-    #[inline(always)]
-    fn widen(self) -> f64 {
-        self
-    }
-}
-
-impl Real for f32 {
-    const ROUNDED: bool = true;
-    #[inline(always)]
-    fn of(x: f64) -> Self {
-        x as f32
-    }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        f32::sqrt(self)
-    }
-    #[inline(always)]
-    fn widen(self) -> f64 {
-        f64::from(self)
-    }
-}
 
 /// `N` single lights: position, intensity times `kd`, and (`f32` only)
 /// the rounding envelope's constant term `38 max_k I_k`.

@@ -44,7 +44,8 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     pub(crate) settled_error: DVec3,
     /// The share of a coarse sum its error may be for the sum to be kept
     /// (`1/32` of a relative target), or `None` where coarse sums are not
-    /// used.
+    /// used; where they are, children are bounded coarsely too
+    /// ([`Shader::bound_children_coarse`]).
     coarse: Option<f64>,
     pub(crate) nodes: u32,
     pub(crate) lights: u32,
@@ -273,7 +274,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     // Children's priorities are capped at the parent's.
                     let frame = n.refined(&top, parent);
                     let outer = std::mem::take(&mut self.settled);
-                    self.refine(node, visible, 1.0, &mut |mut e: Entry| {
+                    self.refine(top.node as usize, visible, 1.0, &mut |mut e: Entry| {
                         e.key = e.key.min(top.key);
                         list.push(e);
                         n.pushed(&e, frame);
@@ -283,7 +284,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     n.settled(frame, settled);
                     n.finish(frame);
                 } else {
-                    self.refine(node, visible, 1.0, &mut *list);
+                    self.refine(top.node as usize, visible, 1.0, &mut *list);
                 }
             } else if let (Some(n), Some(parent)) = (nesting.as_deref_mut(), parent) {
                 let outer = std::mem::take(&mut self.settled);
@@ -385,11 +386,26 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// under its cone.
     #[inline(always)]
     fn enter(&mut self, index: usize, visible: bool, weight: f64) -> Entering {
+        match self.admit(index, visible, weight) {
+            Admitted::Done(entry) => Entering::Done(entry),
+            Admitted::ToBound => match self.tree.nodes[index].cone(self.surface.point) {
+                Some(cone) => Entering::Bound(cone),
+                None => Entering::Done(Some(self.unbounded(index, visible))),
+            },
+        }
+    }
+
+    /// What needs no bound of node `index` entering the cut: dark nodes,
+    /// nodes wholly below the horizon, single (or coincident) lights are
+    /// settled; the rest is counted as a node evaluation and left to be
+    /// bounded.
+    #[inline(always)]
+    fn admit(&mut self, index: usize, visible: bool, weight: f64) -> Admitted {
         let node: &Node = &self.tree.nodes[index];
         if node.intensity == DVec3::ZERO {
             // Dark node: exactly zero whatever its geometry, even when its
             // ball holds the shading point; no query is needed.
-            return Entering::Done(None);
+            return Admitted::Done(None);
         }
         if let Some(plane) = self.tree.node_plane(index)
             && self.below_horizon(plane)
@@ -397,27 +413,31 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             // Every light lies at or below the tangent plane, where the
             // shader's model is exactly 0: settled without a bound.
             self.nodes += 1;
-            return Entering::Done(None);
+            return Admitted::Done(None);
         }
-        let seen = seen(visible || V::ALWAYS_VISIBLE);
         if node.radius == 0.0 {
             // A single light, or coincident lights (the build makes them one
             // leaf): exactly one light of the summed intensity at the
             // centroid, whatever their number.
+            let seen = seen(visible || V::ALWAYS_VISIBLE);
             self.exact_light(node.centroid, node.intensity, seen, weight);
-            return Entering::Done(None);
+            return Admitted::Done(None);
         }
         self.nodes += 1;
-        match node.cone(self.surface.point) {
-            Some(cone) => Entering::Bound(cone),
-            None => Entering::Done(Some(Entry::new(
-                Class::Unbounded,
-                index as u32,
-                seen,
-                DVec3::ZERO,
-                DVec3::ZERO,
-            ))),
-        }
+        Admitted::ToBound
+    }
+
+    /// The entry of node `index` when it has no finite bound (its ball
+    /// reaches the shading point): refined before any other.
+    #[inline(always)]
+    fn unbounded(&self, index: usize, visible: bool) -> Entry {
+        Entry::new(
+            Class::Unbounded,
+            index as u32,
+            seen(visible || V::ALWAYS_VISIBLE),
+            DVec3::ZERO,
+            DVec3::ZERO,
+        )
     }
 
     /// The part of [`evaluate`](Self::evaluate) after the node bound.
@@ -578,70 +598,120 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         }
     }
 
-    /// Refines `node`: its lights exactly if it is a leaf, its children
-    /// otherwise, each with blend weight `weight`; entries that stay in the
-    /// cut are passed to `pending`.
+    /// Refines node `index`: its lights exactly if it is a leaf, its
+    /// children otherwise, each with blend weight `weight`; entries that
+    /// stay in the cut are passed to `pending`.
     #[inline(always)]
     pub(crate) fn refine(
         &mut self,
-        node: &Node,
+        index: usize,
         visible: bool,
         weight: f64,
         pending: &mut impl Pending,
     ) {
+        let tree = self.tree;
+        let node = &tree.nodes[index];
         if node.is_leaf() {
             self.sum_lights(node.lights(), seen(visible || V::ALWAYS_VISIBLE), weight);
-        } else {
-            let known = visible || V::ALWAYS_VISIBLE;
-            // Lights of children summed, not yet added: neighbouring
-            // children's lights are neighbours in the tree's order, and
-            // are summed together (up to a coarse sum's most), unless the
-            // lights are added one at a time.
-            let mut summing: Option<core::ops::Range<usize>> = None;
-            // Children to bound go into `self.group`, bounded side by side
-            // once all are known.
-            for child in node.children() {
-                let c = &self.tree.nodes[child];
-                if known && self.sums_exactly(c) {
-                    // Summing a few visible lights costs less than bounding
-                    // them (the budget counted them in `can_refine`).
-                    let lights = c.lights();
-                    if self.one_by_one {
-                        // In the children's order, as `exact_query` adds.
-                        self.sum_lights(lights, Seen::Visible, weight);
-                        continue;
-                    }
-                    match &mut summing {
-                        Some(run)
-                            if run.end == lights.start
-                                && lights.end - run.start <= COARSE_LIGHTS_MAX =>
-                        {
-                            run.end = lights.end;
-                        }
-                        _ => {
-                            if let Some(run) = summing.replace(lights) {
-                                self.sum_lights(run, Seen::Visible, weight);
-                            }
-                        }
-                    }
+            return;
+        }
+        let known = visible || V::ALWAYS_VISIBLE;
+        // Lights of children summed, not yet added: neighbouring
+        // children's lights are neighbours in the tree's order, and are
+        // summed together (up to a coarse sum's most), unless the lights
+        // are added one at a time.
+        let mut summing: Option<core::ops::Range<usize>> = None;
+        // Children to bound, as bits (child `first_child + i` is bit `i`),
+        // bounded together once all are known.
+        let mut wanted = 0u8;
+        for (i, child) in node.children().enumerate() {
+            let c = &tree.nodes[child];
+            if known && self.sums_exactly(c) {
+                // Summing a few visible lights costs less than bounding
+                // them (the budget counted them in `can_refine`).
+                let lights = c.lights();
+                if self.one_by_one {
+                    // In the children's order, as `exact_query` adds.
+                    self.sum_lights(lights, Seen::Visible, weight);
                     continue;
                 }
-                match self.enter(child, visible, weight) {
-                    Entering::Done(Some(entry)) => pending.pending(entry),
-                    Entering::Done(None) => {}
-                    Entering::Bound(cone) => {
-                        if self.group.len == GROUP {
-                            self.bound_group(visible, weight, pending);
+                match &mut summing {
+                    Some(run)
+                        if run.end == lights.start
+                            && lights.end - run.start <= COARSE_LIGHTS_MAX =>
+                    {
+                        run.end = lights.end;
+                    }
+                    _ => {
+                        if let Some(run) = summing.replace(lights) {
+                            self.sum_lights(run, Seen::Visible, weight);
                         }
-                        self.group.push(child as u32, cone);
                     }
                 }
+                continue;
             }
-            if let Some(run) = summing {
-                self.sum_lights(run, Seen::Visible, weight);
+            match self.admit(child, visible, weight) {
+                Admitted::Done(Some(entry)) => pending.pending(entry),
+                Admitted::Done(None) => {}
+                Admitted::ToBound => wanted |= 1 << i,
             }
-            self.bound_group(visible, weight, pending);
         }
+        if let Some(run) = summing {
+            self.sum_lights(run, Seen::Visible, weight);
+        }
+        if wanted != 0 {
+            self.bound_children(index, wanted, visible, weight, pending);
+        }
+    }
+
+    /// Bounds the children of node `index` whose bits are set in `wanted`
+    /// (already counted as evaluations): together and coarsely where the
+    /// threshold allows and the shader can
+    /// ([`Shader::bound_children_coarse`]), else under their cones, up to
+    /// [`GROUP`] side by side ([`Shader::bound_nodes`]). Entries that stay
+    /// in the cut are passed to `pending`.
+    #[inline(always)]
+    fn bound_children(
+        &mut self,
+        index: usize,
+        wanted: u8,
+        visible: bool,
+        weight: f64,
+        pending: &mut impl Pending,
+    ) {
+        let tree = self.tree;
+        let first = tree.nodes[index].first_child as usize;
+        let lanes = (0..GROUP).filter(|i| wanted & (1 << i) != 0);
+        if self.coarse.is_some() {
+            let mut bounds = [None; GROUP];
+            if self.shader.bound_children_coarse(
+                &self.per_point,
+                self.surface,
+                tree,
+                index,
+                wanted,
+                &mut bounds,
+            ) {
+                for i in lanes {
+                    let entry = match &bounds[i] {
+                        Some(bound) => self.bounded(first + i, visible, weight, bound),
+                        None => Some(self.unbounded(first + i, visible)),
+                    };
+                    if let Some(entry) = entry {
+                        pending.pending(entry);
+                    }
+                }
+                return;
+            }
+        }
+        for i in lanes {
+            let child = first + i;
+            match tree.nodes[child].cone(self.surface.point) {
+                Some(cone) => self.group.push(child as u32, cone),
+                None => pending.pending(self.unbounded(child, visible)),
+            }
+        }
+        self.bound_group(visible, weight, pending);
     }
 
     /// Bounds the nodes waiting in `self.group` together
@@ -714,6 +784,14 @@ impl Group {
         self.cones[self.len] = cone;
         self.len += 1;
     }
+}
+
+/// What [`Cut::admit`] makes of a node entering the cut.
+enum Admitted {
+    /// Settled, or an entry that needs no bound (`None`: nothing to keep).
+    Done(Option<Entry>),
+    /// To be bounded.
+    ToBound,
 }
 
 /// What [`Cut::enter`] makes of a node entering the cut.

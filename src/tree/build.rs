@@ -187,6 +187,7 @@ impl TreeBuilder {
             depth: 0,
             planes: Vec::new(),
             node_planes: Vec::new(),
+            groups: Default::default(),
         };
         if n == 0 {
             return Ok(tree);
@@ -260,6 +261,7 @@ impl TreeBuilder {
         drop(shapes);
         fill_statistics(&mut tree, pool);
         super::plane::record_planes(&mut tree, cheap);
+        tree.fill_groups();
         Ok(tree)
     }
 }

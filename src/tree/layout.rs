@@ -5,6 +5,7 @@ use core::ops::Range;
 
 use glam::{DVec3, Vec3};
 
+use super::groups::NodeGroups;
 use crate::PointLight;
 use crate::geometry::{Aabb, Cone};
 
@@ -196,6 +197,8 @@ pub struct LightTree {
     /// Per node, the plane all its lights lie in exactly (an index into
     /// `planes`) or [`NO_PLANE`]; empty when no plane was recorded.
     pub(crate) node_planes: Vec<u32>,
+    /// Every node's children side by side, for bounding them together.
+    pub(crate) groups: NodeGroups,
 }
 
 /// A node whose lights are not known to lie in one plane.
@@ -288,13 +291,16 @@ impl LightTree {
         self.depth
     }
 
-    /// Heap memory held by the tree, in bytes (nodes, lights, index map).
+    /// Heap memory held by the tree, in bytes (nodes, lights, index map,
+    /// and the nodes' statistics copied side by side for bounding a node's
+    /// children together).
     pub fn memory_bytes(&self) -> usize {
         self.nodes.capacity() * size_of::<Node>()
             + self.lights.capacity() * size_of::<PointLight>()
             + self.order.capacity() * size_of::<u32>()
             + self.planes.capacity() * size_of::<[u32; 3]>()
             + self.node_planes.capacity() * size_of::<u32>()
+            + self.groups.memory_bytes()
     }
 }
 

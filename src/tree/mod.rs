@@ -2,6 +2,7 @@
 //! Nothing here knows shading.
 
 mod build;
+pub(crate) mod groups;
 mod layout;
 mod moments;
 pub(crate) mod morton;

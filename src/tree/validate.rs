@@ -21,6 +21,10 @@ impl LightTree {
     ///   least the members' (they are rounded upward), and so are the
     ///   harmonic norms (recomputed from the members).
     /// * Every stored value is finite.
+    /// * The copy of each node's statistics laid out beside its siblings'
+    ///   (read when a node's children are bounded together) holds exactly
+    ///   the node's values, its box relative to the centroid rounded
+    ///   outward ([`ValidationError::MomentMismatch`] otherwise).
     ///
     /// Time `O(n * depth)`. Property tests call it on every tree they build.
     ///
@@ -145,6 +149,9 @@ impl LightTree {
         }
         if leaf_cover != n {
             return Err(ValidationError::BadCover);
+        }
+        if let Some(node) = self.groups.first_mismatch(&self.nodes) {
+            return Err(ValidationError::MomentMismatch { node });
         }
         Ok(())
     }

@@ -1,0 +1,753 @@
+//! The children of a node bounded together in `f32`: [`Lambert`]'s
+//! multipole series bound (with the paper's and the box's intervals) for
+//! eight nodes at once, from the rows of the tree's node groups, in one
+//! AVX2 vector per quantity.
+//!
+//! Every quantity before the last step is dimensionless, in units of
+//! `I_k kd_k / D^2` for a node of intensity `I_k` at distance `D` (or of
+//! `D` for lengths), so that the ranges of `f32` hold whatever the scene's
+//! scale; the last step multiplies by `I_k kd_k / D^2` in `f64`. The
+//! formulas are those of [`Lambert`]'s docs; what follows is how each is
+//! widened for `f32` rounding, so that the interval still contains the
+//! exact value.
+//!
+//! # Rounding
+//!
+//! Write `u = 2^-24` (the unit roundoff of `f32`). Inputs are exact: the
+//! point `p` and every stored statistic are `f32` values; the unit normal
+//! `n^` is the caller's normal normalized in `f64`, then rounded to `f32`
+//! (`n`, within `1.001 u` of `n^` in length). The derivations are to first
+//! order in `u`, with the constants rounded up; the constants used are
+//! about twice them. Lanes whose squared distance `d2` lies outside
+//! `[2^-120, 2^120]`, or whose ball comes within `2^-6 D` of the point
+//! (`sigma >= 1 - 2^-6`, see [`SIGMA_MAX`]), are not bounded here (the
+//! caller bounds them in `f64`), so no quantity overflows, and what
+//! underflows is covered by an absolute `2^-100` (in units of `I_k kd_k /
+//! D^2`).
+//!
+//! * *The offset.* `d = fl(c - p)` is within `u |c - p|` of `c - p`, so it
+//!   is the exact offset `c - p'` of a point `p'` with `|p' - p| <= u D`.
+//!   Everything below bounds the node seen from `p'`, exactly; the exact
+//!   sum moves by at most `|p' - p| sup |grad f| <= u D * 2.43 I / (D -
+//!   R)^3` between `p'` and `p` (the gradient of `max(0, n.v) / |v|^3` has
+//!   norm at most `2 / |v|^3`; the segment stays `15/16 (D - R)` from the
+//!   members since `D - R > 2^-6 D`), so the final interval is widened by
+//!   [`POINT`]` (D / (D - R))^3` each way.
+//! * *Geometry.* `d2` within `3.01 u` (relative), `D` within `2.51 u`,
+//!   `1/D` within `3.52 u`, each component of `uh = d / D` within `4.53 u`;
+//!   `c0 = n . uh` within `8.6 u` of `n^ . uh^` (absolute: `1.001 u` from
+//!   `n`, `4.53 u` from `uh`, `3.02 u` from the dot product), `sin_c = |n x
+//!   uh|` within `11.2 u`. `sigma` is `R / D` rounded up, multiplied by `1 +
+//!   2^-21` so that it is at least the exact `R / D` (`4.53 u` below it at
+//!   worst, and the product is rounded): every bound below grows with
+//!   `sigma`, so an overestimate keeps it valid, and `sigma < 1 - 2^-6`
+//!   gives `D - R > 2^-6 D` exactly.
+//! * *The paper's interval.* The cone of half-angle `delta` with `sin delta
+//!   = sigma` contains the exact one; the cosines `c0 cd -+ sin_c sigma`
+//!   (`cd = sqrt((1 - sigma)(1 + sigma))`, within `5.5 u`) are within `29.5
+//!   u` of their exact values, and choosing the branch `c0 >= cd` wrongly
+//!   costs at most `22 u` more: both ends are widened by [`COS`]. The
+//!   products with `(1 + sigma)^-2` and `(1 - sigma)^-2` (each within `6 u`)
+//!   are moved outward by `16 u`, relatively.
+//! * *Heights above the tangent plane.* `n . (c - p)` is computed within
+//!   `5.02 u D` of `n^ . (c - p)` for the true point `p` (the rounding of
+//!   `c - p` included), and the box's extent `n . (x - c)` (from the centre
+//!   and half extent of the stored box, itself rounded outward relative to
+//!   `c`) within `8 u B`, `B` the sum over axes of the box's largest
+//!   `|x_j - c_j|`; with the additions, [`HEIGHT`]` (D + B)` covers both, so
+//!   the highest and lowest heights bound those of every member for `p` and
+//!   for `p'`. A highest height at most 0 means every member lies at or
+//!   below the plane: exactly 0. A lowest at most 0 (the box reaches the
+//!   plane) is reported, and the caller decides exactly whether the box
+//!   lies at or below it.
+//! * *The box's bound and the clamp.* `highest / (D - R)^3` and the depth
+//!   below the plane (the smaller of `sigma - c0` and `-lowest / D`, each
+//!   raised by its error) are products of non-negative factors, moved up by
+//!   `16 u` relatively.
+//! * *The series' estimate* `E_k` (degrees 0 to 2; `x = |o_k|_1 / D`, `y =
+//!   sum_e |S_k,e| / D^2` over the six stored entries, whose full matrix's
+//!   entries sum to at most `2 y D^2`): with `|n| <= 1 + 1.001 u`, `|uh| =
+//!   1` and `|grad| <= 2`, the gradient is within `50 u`, the degree-1 term
+//!   within `65 u x`, each of the six weights (at most 24) within `424 u`,
+//!   the degree-2 term within `392 u y` (the weights' errors, the six
+//!   products' sum and `1 / (2 D^2)`), and the sum of the three within
+//!   `11 u + 69 u x + 416 u y`. [`ESTIMATE`] takes `16 + 128 x + 1024 y`
+//!   units of `u`. The `f32` storage of the moments adds `2 u (x + 33 tr(S_k)
+//!   / D^2)` as in the `f64` bound, and the build's `f64` sums of them `2
+//!   delta (sigma + 18 sigma^2)`, which the caller adds in `f64`.
+//! * *The series' remainder* is a sum of minima of products of non-negative
+//!   factors (about 20 roundings), each factor either computed from the
+//!   widened `sigma`, `|c0| +` [`C0`], `sin_c +` [`SIN`] and the box's
+//!   reach across the axis (raised by [`ACROSS`]` B`), or `1/D` (within
+//!   `3.52 u`, at most squared): it is multiplied by `1 +` [`REMAINDER`].
+//! * *Scaling.* `I_k kd_k / D^2` is computed in `f64` from the `f32` `d2`,
+//!   within `3.02 u` (relative) of `I_k kd_k / D'^2`: the lower end is
+//!   multiplied by `1 - 4 u`, the upper by `1 + 4 u`.
+//!
+//! A property test checks each computed quantity against the same formula
+//! evaluated in `f64` (nearly exact next to these slacks) on random and
+//! adversarial nodes, points and normals, within half of its allowance.
+
+use crate::lanes::{Real, Wide};
+use crate::tree::groups::{
+    BOX_HIGH, BOX_LOW, Block, CENTROID, COVARIANCES, HARMONICS, OFFSETS, RADIUS,
+};
+
+/// `2^-24`, the unit roundoff of `f32`.
+pub(crate) const U: f64 = 1.0 / 16_777_216.0;
+
+/// Absolute widening of the cone's cosines, in units of `u` (module docs:
+/// `29.5 u + 22 u`).
+const COS: f64 = 64.0;
+/// Absolute error allowance of the computed `c0`, in units of `u` (`8.6
+/// u`).
+const C0: f64 = 10.0;
+/// Absolute error allowance of the computed `sin_c`, in units of `u`
+/// (`11.2 u`).
+const SIN: f64 = 12.0;
+/// Heights above the tangent plane: allowance in units of `u (D + B)`.
+const HEIGHT: f64 = 12.0;
+/// The box's reach across the axis: allowance in units of `u B` (`nperp`
+/// within `1.001 + 8.6 + 4.53` units of `u`, the products and sums of the
+/// reach within 6 more).
+const ACROSS: f64 = 24.0;
+/// Relative widening of the products behind the paper's and the box's
+/// bounds and of the clamp term, in units of `u`.
+const PRODUCT: f64 = 16.0;
+/// Relative widening of the series' remainder, in units of `u`.
+const REMAINDER: f64 = 64.0;
+/// The series estimate's rounding, in units of `u`: the constant, `x` and
+/// `y` coefficients.
+const ESTIMATE: [f64; 3] = [16.0, 128.0, 1024.0];
+/// The moments' `f32` storage, in units of `u` (`f32::EPSILON = 2 u`).
+const STORAGE: f64 = 2.0;
+/// The point's rounding, in units of `u (D / (D - R))^3` (module docs:
+/// `2.43`).
+const POINT: f64 = 3.0;
+/// The scaling's rounding, in units of `u`, relatively (`3.02 u`).
+const SCALE: f64 = 4.0;
+/// What underflow may lose, absolutely, in units of `I_k kd_k / D^2`.
+const UNDERFLOW: f64 = 7.888_609_052_210_118e-31; // 2^-100
+/// The range of squared distances bounded here: `[2^-120, 2^120]`.
+pub(crate) const D2_RANGE: (f64, f64) = (7.523_163_845_262_64e-37, 1.329_227_995_784_916e36);
+/// `1 - 2^-6`: lanes with `sigma` at or above it are left to the `f64`
+/// bound. Nearer, the rounding of the offset and of `sigma`, magnified by
+/// powers of `D / (D - R)`, would dominate: at this limit [`POINT`]
+/// amounts to `3 u * 2^6`, about `2^-16.4`, of the node's `I kd / (D -
+/// R)^2`, and `sigma`'s upward nudge (at most `8 u`) moves `(D / (D -
+/// R))^2` by `16 u * 2^6`, about `2^-14`, relatively.
+const SIGMA_MAX: f64 = 1.0 - 1.0 / 64.0;
+/// `1 + 2^-21`, which raises a computed `R / D` above the exact one.
+const SIGMA_UP: f64 = 1.0 + 1.0 / 2_097_152.0;
+
+/// What the kernel reads of the shading point: the point and the unit
+/// normal rounded to the lanes' type.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PointView<T> {
+    pub(crate) p: [T; 3],
+    pub(crate) n: [T; 3],
+}
+
+/// What the kernel reads of each lane's node besides its block: per
+/// channel `I_k kd_k`, and the build's bound `delta` on the rounding of its
+/// moments' sums ([`Node::moment_error`](crate::Node::moment_error)).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LaneScales<const N: usize> {
+    pub(crate) intensity: [[f64; N]; 3],
+    pub(crate) moment_error: [f64; N],
+}
+
+/// The children's bounds, per lane. Lanes past the group's children hold
+/// values of no meaning, and so do the bounds of lanes that
+/// [`LaneBounds::state`] does not call [`Lane::Bounded`] or
+/// [`Lane::Reaching`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LaneBounds<const N: usize> {
+    /// Per channel, the interval's ends and its middle (the estimate).
+    pub(crate) lower: [[f64; N]; 3],
+    pub(crate) upper: [[f64; N]; 3],
+    pub(crate) estimate: [[f64; N]; 3],
+    /// The squared distance and `sigma` (at least `R / D`).
+    d2: [f32; N],
+    sigma: [f32; N],
+    /// The upper end of the cone's cosine, widened.
+    cos_hi: [f32; N],
+    /// The highest and lowest heights of the box above the tangent plane,
+    /// widened.
+    highest: [f32; N],
+    lowest: [f32; N],
+}
+
+/// What a lane of [`LaneBounds`] holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Lane {
+    /// Not bounded here (the caller bounds it in `f64`): `d2` out of
+    /// [`D2_RANGE`], or `sigma` at least `1 - 2^-6`.
+    Fallback,
+    /// Every member lies at or below the tangent plane: exactly 0.
+    Dark,
+    /// The box reaches the tangent plane (without lying wholly below it):
+    /// the bounds hold, and whether every member lies at or below the
+    /// plane is for the caller to decide exactly.
+    Reaching,
+    /// The bounds hold.
+    Bounded,
+}
+
+impl<const N: usize> LaneBounds<N> {
+    /// What lane `i` holds (see [`Lane`]).
+    #[inline(always)]
+    pub(crate) fn state(&self, i: usize) -> Lane {
+        let d2 = f64::from(self.d2[i]);
+        if !(d2 >= D2_RANGE.0 && d2 <= D2_RANGE.1 && f64::from(self.sigma[i]) < SIGMA_MAX) {
+            Lane::Fallback
+        } else if self.cos_hi[i] <= 0.0 || self.highest[i] <= 0.0 {
+            Lane::Dark
+        } else if self.lowest[i] <= 0.0 {
+            Lane::Reaching
+        } else {
+            Lane::Bounded
+        }
+    }
+}
+
+/// The geometry of each lane's node seen from the point (see the module
+/// docs), unwidened unless said.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Geometry<T, const N: usize> {
+    pub(crate) d2: Wide<T, N>,
+    pub(crate) dist: Wide<T, N>,
+    pub(crate) inv_d: Wide<T, N>,
+    pub(crate) uh: [Wide<T, N>; 3],
+    /// `R / D`, raised by `1 + 2^-21` (at least the exact value).
+    pub(crate) sigma: Wide<T, N>,
+    pub(crate) c0: Wide<T, N>,
+    pub(crate) sin_c: Wide<T, N>,
+    /// `n . (c - p)`.
+    pub(crate) height: Wide<T, N>,
+    /// `n . middle` and `|n| . half` for the box's centre and half extent
+    /// relative to the centroid.
+    pub(crate) box_mid: Wide<T, N>,
+    pub(crate) box_reach: Wide<T, N>,
+    /// `B = sum_j (|middle_j| + half_j)`.
+    pub(crate) box_size: Wide<T, N>,
+    /// `|nperp . middle| + |nperp| . half`, `nperp = n - c0 uh`.
+    pub(crate) across: Wide<T, N>,
+}
+
+/// Row `field` of a block.
+#[inline(always)]
+fn row<T: Real, const N: usize>(block: &Block<N>, field: usize) -> Wide<T, N> {
+    Wide::from_f32(&block[field])
+}
+
+/// [`Geometry`] of a block's lanes.
+#[inline(always)]
+pub(crate) fn geometry<T: Real, const N: usize>(
+    block: &Block<N>,
+    at: &PointView<T>,
+) -> Geometry<T, N> {
+    let [px, py, pz] = at.p.map(Wide::splat);
+    let [nx, ny, nz] = at.n.map(Wide::splat);
+    let dx = row(block, CENTROID) - px;
+    let dy = row(block, CENTROID + 1) - py;
+    let dz = row(block, CENTROID + 2) - pz;
+    let d2 = dx * dx + dy * dy + dz * dz;
+    let dist = d2.sqrt();
+    let inv_d = Wide::of(1.0) / dist;
+    let uh = [dx * inv_d, dy * inv_d, dz * inv_d];
+    let sigma = row(block, RADIUS) * inv_d * Wide::of(SIGMA_UP);
+    let c0 = nx * uh[0] + ny * uh[1] + nz * uh[2];
+    let cross = [
+        ny * uh[2] - uh[1] * nz,
+        nz * uh[0] - uh[2] * nx,
+        nx * uh[1] - uh[0] * ny,
+    ];
+    let sin_c = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt();
+    let height = nx * dx + ny * dy + nz * dz;
+    let half_of = Wide::of(0.5);
+    let mut middle = [Wide::of(0.0); 3];
+    let mut half = [Wide::of(0.0); 3];
+    for axis in 0..3 {
+        let (lo, hi) = (row(block, BOX_LOW + axis), row(block, BOX_HIGH + axis));
+        middle[axis] = (lo + hi) * half_of;
+        half[axis] = (hi - lo) * half_of;
+    }
+    let box_mid = nx * middle[0] + ny * middle[1] + nz * middle[2];
+    let box_reach = nx.abs() * half[0] + ny.abs() * half[1] + nz.abs() * half[2];
+    let box_size =
+        (middle[0].abs() + half[0]) + (middle[1].abs() + half[1]) + (middle[2].abs() + half[2]);
+    let perp = [nx - c0 * uh[0], ny - c0 * uh[1], nz - c0 * uh[2]];
+    let across = (perp[0] * middle[0] + perp[1] * middle[1] + perp[2] * middle[2]).abs()
+        + (perp[0].abs() * half[0] + perp[1].abs() * half[1] + perp[2].abs() * half[2]);
+    Geometry {
+        d2,
+        dist,
+        inv_d,
+        uh,
+        sigma,
+        c0,
+        sin_c,
+        height,
+        box_mid,
+        box_reach,
+        box_size,
+        across,
+    }
+}
+
+/// The weights of the series through degree 2 that every channel shares
+/// (see [`degree_two_lanes`](super::series)): the gradient `n - 3 c0 uh`
+/// (times `1/D`, applied to `o_k`) and the six weights of `S_k`'s entries
+/// `[xx, yy, zz, xy, xz, yz]` (times `1 / (2 D^2)`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SeriesWeights<T, const N: usize> {
+    pub(crate) grad: [Wide<T, N>; 3],
+    pub(crate) second: [Wide<T, N>; 6],
+    pub(crate) half_inv_d2: Wide<T, N>,
+}
+
+/// [`SeriesWeights`] for the lanes' geometry.
+#[inline(always)]
+pub(crate) fn series_weights<T: Real, const N: usize>(
+    at: &PointView<T>,
+    g: &Geometry<T, N>,
+) -> SeriesWeights<T, N> {
+    let [nx, ny, nz] = at.n.map(Wide::splat);
+    let [ux, uy, uz] = g.uh;
+    let three_c0 = Wide::of(3.0) * g.c0;
+    let a = Wide::of(15.0) * g.c0;
+    let two_a = a + a;
+    let six = Wide::of(6.0);
+    SeriesWeights {
+        grad: [nx - three_c0 * ux, ny - three_c0 * uy, nz - three_c0 * uz],
+        second: [
+            a * ux * ux - three_c0 - six * ux * nx,
+            a * uy * uy - three_c0 - six * uy * ny,
+            a * uz * uz - three_c0 - six * uz * nz,
+            two_a * ux * uy - six * (ux * ny + uy * nx),
+            two_a * ux * uz - six * (ux * nz + uz * nx),
+            two_a * uy * uz - six * (uy * nz + uz * ny),
+        ],
+        half_inv_d2: Wide::of(0.5) * (g.inv_d * g.inv_d),
+    }
+}
+
+/// The multipole series through degree 2 of channel `k`, in units of `I_k
+/// / D^2` (unwidened): `c0 + (n.o - 3 c0 uh.o) / D + (15 c0 uh.S.uh - 3 c0
+/// tr S - 6 uh.S.n) / (2 D^2)`.
+#[inline(always)]
+pub(crate) fn estimate<T: Real, const N: usize>(
+    block: &Block<N>,
+    g: &Geometry<T, N>,
+    w: &SeriesWeights<T, N>,
+    k: usize,
+) -> Wide<T, N> {
+    let o = |a: usize| row::<T, N>(block, OFFSETS + 3 * k + a);
+    let first = (w.grad[0] * o(0) + w.grad[1] * o(1) + w.grad[2] * o(2)) * g.inv_d;
+    let mut second = Wide::of(0.0);
+    for (e, weight) in w.second.into_iter().enumerate() {
+        second += row::<T, N>(block, COVARIANCES + 6 * k + e) * weight;
+    }
+    g.c0 + first + second * w.half_inv_d2
+}
+
+/// What the series' remainder shares between channels: the widened
+/// `|c0|`, `hperp / D`, the harmonic factors `A_m` (`m = 3, 4, 5`) and the
+/// tail sums `G1`, `G2` (see [`tail_sums`](super::series)).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RemainderTerms<T, const N: usize> {
+    pub(crate) ac: Wide<T, N>,
+    pub(crate) hperp: Wide<T, N>,
+    pub(crate) harmonic: [Wide<T, N>; 3],
+    pub(crate) g1: Wide<T, N>,
+    pub(crate) g2: Wide<T, N>,
+}
+
+/// [`RemainderTerms`] from the widened `|c0|`, `nu^2` and `hperp / D`.
+#[inline(always)]
+pub(crate) fn remainder_terms<T: Real, const N: usize>(
+    g: &Geometry<T, N>,
+    ac: Wide<T, N>,
+    nu2: Wide<T, N>,
+    hperp: Wide<T, N>,
+) -> RemainderTerms<T, N> {
+    let sigma = g.sigma;
+    let one = Wide::of(1.0);
+    let inv_rho = one / (one - sigma);
+    let c2 = ac * ac;
+    let harmonic = |m: f64| {
+        (c2 * Wide::of((m + 1.0) * (m + 1.0)) + nu2 * Wide::of(0.5 * m * (m + 1.0))).sqrt()
+    };
+    RemainderTerms {
+        ac,
+        hperp,
+        harmonic: [harmonic(3.0), harmonic(4.0), harmonic(5.0)],
+        g1: Wide::of(7.0) * inv_rho + sigma * inv_rho * inv_rho,
+        g2: Wide::of(0.5)
+            * inv_rho
+            * (Wide::of(42.0) + inv_rho * sigma * (Wide::of(13.0) + (one + sigma) * inv_rho)),
+    }
+}
+
+/// The series' remainder from degree 3 of channel `k`, in units of `I_k /
+/// D^2` (as [`series_width`](super::series)'s, unwidened), with `mu_2 =
+/// tr(S_k) / D^2`.
+#[inline(always)]
+pub(crate) fn remainder<T: Real, const N: usize>(
+    block: &Block<N>,
+    g: &Geometry<T, N>,
+    r: &RemainderTerms<T, N>,
+    mu2: Wide<T, N>,
+    k: usize,
+) -> Wide<T, N> {
+    let sigma = g.sigma;
+    let mut total = Wide::of(0.0);
+    let mut mu_prev = mu2;
+    let mut sigma_m = sigma * sigma * sigma;
+    for d in 0..3 {
+        let m = (d + 3) as f64;
+        let q = row::<T, N>(block, HARMONICS + 3 * k + d) * sigma_m;
+        let across =
+            q * (r.ac * Wide::of(m + 1.0)) + mu_prev * (r.hperp * Wide::of(0.5 * m * (m + 1.0)));
+        total += (q * r.harmonic[d]).min(across);
+        mu_prev *= sigma;
+        sigma_m *= sigma;
+    }
+    let tail = mu_prev * sigma * r.g1;
+    total += tail.min(tail * r.ac + mu_prev * (r.hperp * r.g2));
+    total
+}
+
+/// The bounds of a block's lanes (see the module docs), each end in `f64`
+/// units of radiance: the `f32` interval times `I_k kd_k / D^2`.
+#[inline(always)]
+pub(crate) fn lane_bounds<const N: usize>(
+    block: &Block<N>,
+    at: &PointView<f32>,
+    scales: &LaneScales<N>,
+) -> LaneBounds<N> {
+    let w = |x: f64| Wide::<f32, N>::of(x);
+    let u = |units: f64| w(units * U);
+    let zero = w(0.0);
+    let one = w(1.0);
+    let g = geometry(block, at);
+    let sigma = g.sigma;
+    let (c0, sin_c) = (g.c0, g.sin_c);
+
+    // The paper's interval.
+    let one_minus = one - sigma;
+    let one_plus = one + sigma;
+    let inv_rho = one / one_minus;
+    let far = one / one_plus;
+    let cd = (one_minus * one_plus).sqrt();
+    let cos_hi = (Wide::select_ge(c0, cd, one, c0 * cd + sin_c * sigma) + u(COS)).min(one);
+    let cos_lo = (c0 * cd - sin_c * sigma - u(COS)).max(-one);
+    let lower_paper = cos_lo.max(zero) * far * far * (one - u(PRODUCT));
+    let upper_paper = cos_hi * inv_rho * inv_rho * (one + u(PRODUCT));
+    let inv_rho3 = inv_rho * inv_rho * inv_rho;
+
+    // Heights of the box above the tangent plane.
+    let slack = u(HEIGHT) * (g.dist + g.box_size);
+    let highest = g.height + g.box_mid + g.box_reach + slack;
+    let lowest = g.height + g.box_mid - g.box_reach - slack;
+    let grow = one + u(PRODUCT);
+    let box_upper = highest * g.inv_d * inv_rho3 * grow;
+    let ball_depth = sigma - c0 + u(C0 + 2.0);
+    let box_depth = -lowest * g.inv_d * (one + u(8.0));
+    let straddle = ball_depth.min(box_depth).max(zero) * inv_rho3 * grow;
+    let upper_geometric = upper_paper.min(box_upper);
+
+    // The series, its inputs widened.
+    let weights = series_weights(at, &g);
+    let nu = sin_c + u(SIN);
+    let terms = remainder_terms(
+        &g,
+        c0.abs() + u(C0),
+        nu * nu,
+        (g.across + u(ACROSS) * g.box_size) * g.inv_d * (one + u(8.0)),
+    );
+    let point = u(POINT) * inv_rho3 + w(UNDERFLOW);
+    let inv_d2 = g.inv_d * g.inv_d;
+    let mut lo = [zero; 3];
+    let mut hi = [zero; 3];
+    // Per lane, the largest `lo - hi` over the channels: positive where
+    // the intervals are disjoint in some channel.
+    let mut disjoint = w(f64::from(f32::MIN));
+    for k in 0..3 {
+        let e = estimate(block, &g, &weights, k);
+        let o = |a: usize| row::<f32, N>(block, OFFSETS + 3 * k + a);
+        let x = (o(0).abs() + o(1).abs() + o(2).abs()) * g.inv_d;
+        let s = |e: usize| row::<f32, N>(block, COVARIANCES + 6 * k + e);
+        let trace = s(0) + s(1) + s(2);
+        let entries = s(0).abs() + s(1).abs() + s(2).abs() + s(3).abs() + s(4).abs() + s(5).abs();
+        let mu2 = trace * inv_d2;
+        let y = entries * inv_d2;
+        let rest = remainder(block, &g, &terms, mu2, k);
+        let width = rest * (one + u(REMAINDER))
+            + u(ESTIMATE[0])
+            + u(ESTIMATE[1]) * x
+            + u(ESTIMATE[2]) * y
+            + u(STORAGE) * (x + w(33.0) * mu2)
+            + w(UNDERFLOW);
+        lo[k] = lower_paper.max(e - width);
+        hi[k] = upper_geometric.min(e + width + straddle);
+        disjoint = disjoint.max(lo[k] - hi[k]);
+    }
+
+    // In f64: the scale, and the build's rounding of the moments' sums
+    // (`2 delta (sigma + 18 sigma^2)`, as in the f64 bound).
+    let sigma64 = sigma.widen();
+    let delta = Wide(scales.moment_error);
+    let sums = Wide::of(2.0) * delta * sigma64 * (Wide::of(1.0) + Wide::of(18.0) * sigma64);
+    let inv_d2_64 = Wide::of(1.0) / g.d2.widen();
+    let (down, up) = (Wide::of(1.0 - SCALE * U), Wide::of(1.0 + SCALE * U));
+    let point64 = point.widen();
+    let mut lower = [[0.0; N]; 3];
+    let mut upper = [[0.0; N]; 3];
+    let mut estimate = [[0.0; N]; 3];
+    for k in 0..3 {
+        // Both intervals contain the exact value; if rounding beyond the
+        // allowances ever made them disjoint, the paper's holds.
+        let a = Wide::select_ge(zero, disjoint, lo[k], lower_paper).widen();
+        let b = Wide::select_ge(zero, disjoint, hi[k], upper_paper).widen();
+        let scale = Wide(scales.intensity[k]) * inv_d2_64;
+        let l = ((a - point64 - sums) * scale * down).max(Wide::of(0.0));
+        let h = (b + point64 + sums) * scale * up;
+        lower[k] = l.0;
+        upper[k] = h.0;
+        estimate[k] = (Wide::of(0.5) * (l + h)).0;
+    }
+    LaneBounds {
+        lower,
+        upper,
+        estimate,
+        d2: g.d2.0,
+        sigma: sigma.0,
+        cos_hi: cos_hi.0,
+        highest: highest.0,
+        lowest: lowest.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{DVec3, Vec3};
+
+    use super::*;
+    use crate::testing::uniform;
+    use crate::tree::groups::Group;
+    use crate::{LightTree, PointLight};
+
+    /// The largest ratio of an observed error to its allowance, per
+    /// quantity, over every lane checked.
+    #[derive(Debug, Default)]
+    struct Worst {
+        /// The exact `R / D` over the computed `sigma` (at most 1).
+        sigma: f64,
+        c0: f64,
+        sin_c: f64,
+        height: f64,
+        estimate: f64,
+        remainder: f64,
+        lanes: usize,
+    }
+
+    /// One lane's `f32` quantities against the same formulas in `f64` at
+    /// the point `p'` the rounded offset stands for (module docs): each
+    /// within its allowance.
+    fn check_lane<const N: usize>(
+        block: &Block<N>,
+        lane: usize,
+        point: Vec3,
+        normal: DVec3,
+        worst: &mut Worst,
+    ) {
+        let at32 = PointView {
+            p: point.to_array(),
+            n: normal.as_vec3().to_array(),
+        };
+        let g32 = geometry::<f32, N>(block, &at32);
+        let (d2, sigma) = (f64::from(g32.d2.0[lane]), f64::from(g32.sigma.0[lane]));
+        if !(d2 >= D2_RANGE.0 && d2 <= D2_RANGE.1 && sigma < SIGMA_MAX) {
+            return;
+        }
+        // p' = c - fl(c - p), in f64 (exact for these magnitudes).
+        let c = DVec3::new(
+            f64::from(block[CENTROID][lane]),
+            f64::from(block[CENTROID + 1][lane]),
+            f64::from(block[CENTROID + 2][lane]),
+        );
+        let d32 = DVec3::new(
+            f64::from(block[CENTROID][lane] - point.x),
+            f64::from(block[CENTROID + 1][lane] - point.y),
+            f64::from(block[CENTROID + 2][lane] - point.z),
+        );
+        let moved = c - d32;
+        let at64 = PointView {
+            p: moved.to_array(),
+            n: normal.to_array(),
+        };
+        let mut g64 = geometry::<f64, N>(block, &at64);
+        // The exact R / D at p' (to f64 precision), without the f32 path's
+        // upward nudge.
+        g64.sigma = Wide(g64.sigma.0.map(|s| s / SIGMA_UP));
+        let dist = g64.dist.0[lane];
+        let l32 = |w: Wide<f32, N>| f64::from(w.0[lane]);
+        let l64 = |w: Wide<f64, N>| w.0[lane];
+        let ratio = |err: f64, allowance: f64| err / allowance;
+        let up = |r: &mut f64, x: f64| *r = r.max(x);
+        up(
+            &mut worst.sigma,
+            l64(g64.sigma) / l32(g32.sigma).max(f64::MIN_POSITIVE),
+        );
+        up(
+            &mut worst.c0,
+            ratio((l32(g32.c0) - l64(g64.c0)).abs(), C0 * U),
+        );
+        up(
+            &mut worst.sin_c,
+            ratio((l32(g32.sin_c) - l64(g64.sin_c)).abs(), SIN * U),
+        );
+        // Heights for the true point p, from the f32 values at p.
+        let at_p = PointView {
+            p: point.as_dvec3().to_array(),
+            n: normal.to_array(),
+        };
+        let gp = geometry::<f64, N>(block, &at_p);
+        let top = |g: &Geometry<f64, N>| l64(g.height) + l64(g.box_mid) + l64(g.box_reach);
+        let top32 = l32(g32.height) + l32(g32.box_mid) + l32(g32.box_reach);
+        let size = dist + l64(gp.box_size);
+        up(
+            &mut worst.height,
+            ratio((top32 - top(&gp)).abs(), HEIGHT * U * size),
+        );
+        // The estimate, per channel.
+        let w32 = series_weights(&at32, &g32);
+        let w64 = series_weights(&at64, &g64);
+        let inv_d = 1.0 / dist;
+        for k in 0..3 {
+            let e32 = l32(estimate(block, &g32, &w32, k));
+            let e64 = l64(estimate(block, &g64, &w64, k));
+            let x: f64 = (0..3)
+                .map(|a| f64::from(block[OFFSETS + 3 * k + a][lane]).abs())
+                .sum::<f64>()
+                * inv_d;
+            let y: f64 = (0..6)
+                .map(|e| f64::from(block[COVARIANCES + 6 * k + e][lane]).abs())
+                .sum::<f64>()
+                * inv_d
+                * inv_d;
+            let allowance = U * (ESTIMATE[0] + ESTIMATE[1] * x + ESTIMATE[2] * y);
+            up(&mut worst.estimate, ratio((e32 - e64).abs(), allowance));
+            // The remainder from the widened f32 inputs, widened, against
+            // the f64 one from the exact inputs: at least as large.
+            let u = |units: f64| Wide::<f32, N>::of(units * U);
+            let nu = g32.sin_c + u(SIN);
+            let one = Wide::of(1.0);
+            let t32 = remainder_terms(
+                &g32,
+                g32.c0.abs() + u(C0),
+                nu * nu,
+                (g32.across + u(ACROSS) * g32.box_size) * g32.inv_d * (one + u(8.0)),
+            );
+            let trace = |scale: f64| {
+                (0..3)
+                    .map(|e| f64::from(block[COVARIANCES + 6 * k + e][lane]))
+                    .sum::<f64>()
+                    * scale
+            };
+            let mu2_32 = {
+                let s = |e: usize| Wide::<f32, N>::from_f32(&block[COVARIANCES + 6 * k + e]);
+                (s(0) + s(1) + s(2)) * g32.inv_d * g32.inv_d
+            };
+            let r32 = l32(remainder(block, &g32, &t32, mu2_32, k)) * (1.0 + REMAINDER * U);
+            let t64 = remainder_terms(
+                &g64,
+                g64.c0.abs(),
+                g64.sin_c * g64.sin_c,
+                g64.across * g64.inv_d,
+            );
+            let mu2_64 = Wide::<f64, N>::splat(trace(inv_d * inv_d));
+            let r64 = l64(remainder(block, &g64, &t64, mu2_64, k));
+            // Below 1 when the f32 remainder covers the f64 one.
+            if r64 > 0.0 {
+                up(&mut worst.remainder, r64 / r32.max(f64::MIN_POSITIVE));
+            }
+        }
+        worst.lanes += 1;
+    }
+
+    /// Random light sets (balls, slabs, lines; near the origin and far
+    /// from it), every group of their trees, seen from random points at
+    /// distances from just outside a child's ball to far away, with random,
+    /// grazing and facing normals: every quantity of the `f32` kernel is
+    /// within its allowance of its `f64` value.
+    #[test]
+    fn f32_quantities_stay_within_their_allowances() {
+        let mut state = 17u64;
+        let mut u = move || f64::from(uniform(&mut state));
+        let mut worst = Worst::default();
+        for scene in 0..40 {
+            let shape = scene % 4;
+            let centre =
+                DVec3::new(u() - 0.5, u() - 0.5, u() - 0.5) * [0.0, 1e2, 1e4, 3e5][scene % 4];
+            let extent = 10f64.powf(4.0 * u() - 2.0);
+            let lights: Vec<PointLight> = (0..600)
+                .map(|_| {
+                    let a = DVec3::new(u() - 0.5, u() - 0.5, u() - 0.5);
+                    let offset = match shape {
+                        0 => a,
+                        1 => DVec3::new(a.x, a.y, 1e-3 * a.z),
+                        2 => DVec3::new(a.x, 1e-4 * a.y, 1e-4 * a.z),
+                        _ => a.normalize_or_zero(),
+                    };
+                    let colour = Vec3::new(u() as f32, u() as f32 * 2.0, u() as f32 * 0.1);
+                    PointLight::new((centre + offset * extent).as_vec3(), colour)
+                })
+                .collect();
+            let tree = LightTree::build(&lights).unwrap();
+            for (index, parent) in tree.nodes().iter().enumerate() {
+                let Some(group) = tree.groups.children(index, parent) else {
+                    continue;
+                };
+                let children = &tree.nodes()[parent.children()];
+                for (lane, child) in children.iter().enumerate() {
+                    let c = child.centroid().as_dvec3();
+                    let r = f64::from(child.radius()).max(extent * 1e-6);
+                    let dir = DVec3::new(u() - 0.5, u() - 0.5, u() - 0.5).normalize_or(DVec3::X);
+                    // Just outside the f32 path's limit (sigma just below
+                    // 1 - 2^-6), or 10^-3 to 10^3 radii beyond the ball.
+                    let gap = if u() < 0.2 {
+                        0.0159 + 0.002 * u()
+                    } else {
+                        10f64.powf(6.0 * u() - 3.0)
+                    };
+                    let point = (c + dir * r * (1.0 + gap)).as_vec3();
+                    let uh = (c - point.as_dvec3()).normalize_or(DVec3::X);
+                    let side = uh.any_orthonormal_vector();
+                    let normal = match (scene + lane) % 3 {
+                        0 => DVec3::new(u() - 0.5, u() - 0.5, u() - 0.5).normalize_or(DVec3::Z),
+                        1 => (side + uh * 1e-4 * (u() - 0.5)).normalize(),
+                        _ => (uh + side * 0.3 * (u() - 0.5)).normalize(),
+                    };
+                    match group {
+                        Group::Four(block) => check_lane(block, lane, point, normal, &mut worst),
+                        Group::Eight(block) => check_lane(block, lane, point, normal, &mut worst),
+                    }
+                }
+            }
+        }
+        assert!(worst.lanes > 2000, "{worst:?}");
+        for (what, r) in [
+            ("sigma", worst.sigma),
+            ("c0", worst.c0),
+            ("sin_c", worst.sin_c),
+            ("height", worst.height),
+            ("estimate", worst.estimate),
+            ("remainder", worst.remainder),
+        ] {
+            assert!(r <= 1.0, "{what}: {r} of its allowance ({worst:?})");
+        }
+    }
+}
