@@ -90,7 +90,7 @@
 
 use crate::lanes::{Real, Wide};
 use crate::tree::groups::{
-    BOX_HIGH, BOX_LOW, Block, CENTROID, COVARIANCES, HARMONICS, OFFSETS, RADIUS,
+    BOX_HIGH, BOX_LOW, Block, CENTROID, COVARIANCES, OFFSETS, RADIUS, widen_half,
 };
 
 /// `2^-24`, the unit roundoff of `f32`.
@@ -238,7 +238,17 @@ pub(crate) struct Geometry<T, const N: usize> {
 /// Row `field` of a block.
 #[inline(always)]
 fn row<T: Real, const N: usize>(block: &Block<N>, field: usize) -> Wide<T, N> {
-    Wide::from_f32(&block[field])
+    Wide::from_f32(&block.rows[field])
+}
+
+/// The harmonic norms of degree `3 + d`, channel `k`, of a block (exact
+/// values of their half-precision bits).
+#[inline(always)]
+fn norms<T: Real, const N: usize>(block: &Block<N>, k: usize, d: usize) -> Wide<T, N> {
+    let row = &block.norms[3 * k + d];
+    Wide(crate::lanes::array(T::default(), |i| {
+        T::from_f32(widen_half(row[i]))
+    }))
 }
 
 /// [`Geometry`] of a block's lanes.
@@ -407,7 +417,7 @@ pub(crate) fn remainder<T: Real, const N: usize>(
     let mut sigma_m = sigma * sigma * sigma;
     for d in 0..3 {
         let m = (d + 3) as f64;
-        let q = row::<T, N>(block, HARMONICS + 3 * k + d) * sigma_m;
+        let q = norms::<T, N>(block, k, d) * sigma_m;
         let across =
             q * (r.ac * Wide::of(m + 1.0)) + mu_prev * (r.hperp * Wide::of(0.5 * m * (m + 1.0)));
         total += (q * r.harmonic[d]).min(across);
@@ -574,14 +584,14 @@ mod tests {
         }
         // p' = c - fl(c - p), in f64 (exact for these magnitudes).
         let c = DVec3::new(
-            f64::from(block[CENTROID][lane]),
-            f64::from(block[CENTROID + 1][lane]),
-            f64::from(block[CENTROID + 2][lane]),
+            f64::from(block.rows[CENTROID][lane]),
+            f64::from(block.rows[CENTROID + 1][lane]),
+            f64::from(block.rows[CENTROID + 2][lane]),
         );
         let d32 = DVec3::new(
-            f64::from(block[CENTROID][lane] - point.x),
-            f64::from(block[CENTROID + 1][lane] - point.y),
-            f64::from(block[CENTROID + 2][lane] - point.z),
+            f64::from(block.rows[CENTROID][lane] - point.x),
+            f64::from(block.rows[CENTROID + 1][lane] - point.y),
+            f64::from(block.rows[CENTROID + 2][lane] - point.z),
         );
         let moved = c - d32;
         let at64 = PointView {
@@ -630,11 +640,11 @@ mod tests {
             let e32 = l32(estimate(block, &g32, &w32, k));
             let e64 = l64(estimate(block, &g64, &w64, k));
             let x: f64 = (0..3)
-                .map(|a| f64::from(block[OFFSETS + 3 * k + a][lane]).abs())
+                .map(|a| f64::from(block.rows[OFFSETS + 3 * k + a][lane]).abs())
                 .sum::<f64>()
                 * inv_d;
             let y: f64 = (0..6)
-                .map(|e| f64::from(block[COVARIANCES + 6 * k + e][lane]).abs())
+                .map(|e| f64::from(block.rows[COVARIANCES + 6 * k + e][lane]).abs())
                 .sum::<f64>()
                 * inv_d
                 * inv_d;
@@ -653,12 +663,12 @@ mod tests {
             );
             let trace = |scale: f64| {
                 (0..3)
-                    .map(|e| f64::from(block[COVARIANCES + 6 * k + e][lane]))
+                    .map(|e| f64::from(block.rows[COVARIANCES + 6 * k + e][lane]))
                     .sum::<f64>()
                     * scale
             };
             let mu2_32 = {
-                let s = |e: usize| Wide::<f32, N>::from_f32(&block[COVARIANCES + 6 * k + e]);
+                let s = |e: usize| Wide::<f32, N>::from_f32(&block.rows[COVARIANCES + 6 * k + e]);
                 (s(0) + s(1) + s(2)) * g32.inv_d * g32.inv_d
             };
             let r32 = l32(remainder(block, &g32, &t32, mu2_32, k)) * (1.0 + REMAINDER * U);
@@ -708,7 +718,7 @@ mod tests {
                 .collect();
             let tree = LightTree::build(&lights).unwrap();
             for (index, parent) in tree.nodes().iter().enumerate() {
-                let Some(group) = tree.groups.children(index, parent) else {
+                let Some(group) = tree.groups.children(index) else {
                     continue;
                 };
                 let children = &tree.nodes()[parent.children()];

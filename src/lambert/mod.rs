@@ -386,7 +386,7 @@ impl Shader for Lambert {
         let Some(node) = tree.nodes().get(parent) else {
             return false;
         };
-        let Some(group) = tree.groups.children(parent, node) else {
+        let Some(group) = tree.groups.children(parent) else {
             return false;
         };
         let p = surface.point.as_vec3();

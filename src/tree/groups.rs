@@ -1,25 +1,28 @@
-//! The children of every node side by side: structure-of-arrays blocks of
-//! `f32`, so that a node's children are bounded together from a few
-//! contiguous vector loads instead of gathered field by field from their
-//! node records.
+//! The children of every node side by side: structure-of-arrays blocks,
+//! so that a node's children are bounded together from a few contiguous
+//! vector loads instead of gathered field by field from their node records.
 //!
-//! The children of a node with at most four children form a block of
-//! [`FIELDS`] rows of four lanes (one SSE vector of `f32` per row), those
-//! of a node with five to eight children a block of rows of eight lanes
-//! (one AVX2 vector): row `f` holds field `f` of every child, lane `i`
-//! being child `first_child + i`; lanes past the children repeat the last
-//! child (finite values, ignored by the readers). A table gives where each
-//! node's block starts.
+//! The children of a node with at most four children form a [`Block`] of
+//! four lanes (one SSE vector of `f32` per row), those of a node with five
+//! to eight children a block of eight lanes (one AVX2 vector): row `f`
+//! holds field `f` of every child, lane `i` being child `first_child + i`;
+//! lanes past the children repeat the last child (finite values, ignored by
+//! the readers). A table gives each node's block.
 //!
 //! What a lane holds is taken from the node's own statistics (see
-//! [`Node`]) without further rounding, except for its box, which is stored
-//! relative to its centroid and rounded outward, so that the stored box
-//! still contains every member.
+//! [`Node`]) without further rounding, except for two fields: its box,
+//! stored relative to its centroid and rounded outward, so that it still
+//! contains every member; and its harmonic norms, stored as half-precision
+//! numbers rounded upward (see [`half_up`]), so that they still bound the
+//! node's multipoles.
 
 use super::layout::{LightTree, Node};
 
-/// Rows of a block, one per field.
-pub(crate) const FIELDS: usize = 46;
+/// `f32` rows of a block, one per field.
+pub(crate) const ROWS: usize = 37;
+/// Half-precision rows of a block: the harmonic norms, channel `k`,
+/// degree `3 + d` at `3 k + d`.
+pub(crate) const NORMS: usize = 9;
 
 /// Row of the centroid's `x` (`y` and `z` follow).
 pub(crate) const CENTROID: usize = 0;
@@ -36,24 +39,31 @@ pub(crate) const OFFSETS: usize = 10;
 /// Rows of the second moments `S_k`: channel `k`, entry `e` (`[xx, yy, zz,
 /// xy, xz, yz]`) at `COVARIANCES + 6 k + e`.
 pub(crate) const COVARIANCES: usize = 19;
-/// Rows of the harmonic norms: channel `k`, degree `3 + d` at
-/// `HARMONICS + 3 k + d`.
-pub(crate) const HARMONICS: usize = 37;
 
-/// No block: a leaf's entry in the table.
-const NO_BLOCK: u32 = u32::MAX;
+/// A node's children side by side, `N` lanes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Block<const N: usize> {
+    /// The `f32` fields ([`ROWS`] of them).
+    pub(crate) rows: [[f32; N]; ROWS],
+    /// The harmonic norms, half-precision bits rounded upward ([`NORMS`]
+    /// of them).
+    pub(crate) norms: [[u16; N]; NORMS],
+}
 
 /// The blocks of every node's children (see the module docs).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub(crate) struct NodeGroups {
-    rows: Vec<f32>,
-    /// Per node, where its children's block starts in `rows`, or
-    /// [`NO_BLOCK`].
+    fours: Vec<Block<4>>,
+    eights: Vec<Block<8>>,
+    /// Per node, its children's block: an index into `fours`, or into
+    /// `eights` with [`EIGHT`] set; [`NO_BLOCK`] for a leaf.
     at: Vec<u32>,
 }
 
-/// A block of `N` lanes: `FIELDS` rows.
-pub(crate) type Block<const N: usize> = [[f32; N]; FIELDS];
+/// No block: a leaf's entry in the table.
+const NO_BLOCK: u32 = u32::MAX;
+/// The table's flag for a block of eight lanes.
+const EIGHT: u32 = 1 << 31;
 
 /// The children of one node.
 #[derive(Clone, Copy, Debug)]
@@ -64,96 +74,163 @@ pub(crate) enum Group<'a> {
     Eight(&'a Block<8>),
 }
 
-/// Lanes of the block of a node of `count` children.
-#[inline(always)]
-fn lanes_for(count: usize) -> usize {
-    if count <= 4 { 4 } else { 8 }
+impl Group<'_> {
+    /// The block's address range.
+    #[inline(always)]
+    pub(crate) fn bytes(&self) -> core::ops::Range<usize> {
+        let (start, len) = match self {
+            Group::Four(b) => (core::ptr::from_ref(*b) as usize, size_of::<Block<4>>()),
+            Group::Eight(b) => (core::ptr::from_ref(*b) as usize, size_of::<Block<8>>()),
+        };
+        start..start + len
+    }
+}
+
+impl<const N: usize> Block<N> {
+    /// The block of `children` (at most `N`, at least one).
+    fn of(children: &[Node]) -> Self {
+        let mut block = Self {
+            rows: [[0.0; N]; ROWS],
+            norms: [[0; N]; NORMS],
+        };
+        for lane in 0..N {
+            let child = &children[lane.min(children.len() - 1)];
+            let (rows, norms) = lane_values(child);
+            for (row, value) in block.rows.iter_mut().zip(rows) {
+                row[lane] = value;
+            }
+            for (row, value) in block.norms.iter_mut().zip(norms) {
+                row[lane] = value;
+            }
+        }
+        block
+    }
 }
 
 impl NodeGroups {
-    /// The blocks of `nodes` (a built tree's, root first). Trees too large
-    /// for the table's offsets get none (their children are bounded one
-    /// by one).
+    /// The blocks of `nodes` (a built tree's, root first).
     pub(crate) fn new(nodes: &[Node]) -> Self {
-        let mut at = vec![NO_BLOCK; nodes.len()];
-        let size: usize = nodes
-            .iter()
-            .filter(|n| !n.is_leaf())
-            .map(|n| lanes_for(n.children().len()) * FIELDS)
-            .sum();
-        if size >= NO_BLOCK as usize {
-            return Self::default();
-        }
-        let mut rows = vec![0.0f32; size];
-        let mut start = 0;
+        let inner = nodes.iter().filter(|n| !n.is_leaf());
+        let eights = inner.filter(|n| n.children().len() > 4).count();
+        let fours = nodes.iter().filter(|n| !n.is_leaf()).count() - eights;
+        let mut groups = Self {
+            fours: Vec::with_capacity(fours),
+            eights: Vec::with_capacity(eights),
+            at: vec![NO_BLOCK; nodes.len()],
+        };
         for (index, parent) in nodes.iter().enumerate() {
             if parent.is_leaf() {
                 continue;
             }
             let children = &nodes[parent.children()];
-            let lanes = lanes_for(children.len());
-            at[index] = start as u32;
-            for lane in 0..lanes {
-                let child = &children[lane.min(children.len() - 1)];
-                for (field, value) in lane_values(child).into_iter().enumerate() {
-                    rows[start + field * lanes + lane] = value;
-                }
-            }
-            start += lanes * FIELDS;
+            // Node counts fit in `u32`, and so do block counts (fewer).
+            groups.at[index] = if children.len() <= 4 {
+                groups.fours.push(Block::of(children));
+                (groups.fours.len() - 1) as u32
+            } else {
+                groups.eights.push(Block::of(children));
+                (groups.eights.len() - 1) as u32 | EIGHT
+            };
         }
-        Self { rows, at }
+        groups
     }
 
-    /// The children of node `index`, or `None` for a leaf (or a tree too
-    /// large for the table).
+    /// The children of node `index`, or `None` for a leaf.
     #[inline(always)]
-    pub(crate) fn children(&self, index: usize, parent: &Node) -> Option<Group<'_>> {
-        let start = *self.at.get(index)?;
-        if start == NO_BLOCK {
-            return None;
-        }
-        let start = start as usize;
-        if parent.children().len() <= 4 {
-            let rows = self.rows.get(start..start + 4 * FIELDS)?;
-            let (block, _) = rows.as_chunks::<4>();
-            Some(Group::Four(block.try_into().ok()?))
+    pub(crate) fn children(&self, index: usize) -> Option<Group<'_>> {
+        let at = *self.at.get(index)?;
+        if at == NO_BLOCK {
+            None
+        } else if at & EIGHT == 0 {
+            self.fours.get(at as usize).map(Group::Four)
         } else {
-            let rows = self.rows.get(start..start + 8 * FIELDS)?;
-            let (block, _) = rows.as_chunks::<8>();
-            Some(Group::Eight(block.try_into().ok()?))
+            self.eights.get((at & !EIGHT) as usize).map(Group::Eight)
         }
     }
 
     /// Heap memory held, in bytes.
     pub(crate) fn memory_bytes(&self) -> usize {
-        self.rows.capacity() * size_of::<f32>() + self.at.capacity() * size_of::<u32>()
+        self.fours.capacity() * size_of::<Block<4>>()
+            + self.eights.capacity() * size_of::<Block<8>>()
+            + self.at.capacity() * size_of::<u32>()
     }
 
     /// The first node whose children's block does not hold exactly what
     /// [`NodeGroups::new`] makes of `nodes`.
     pub(crate) fn first_mismatch(&self, nodes: &[Node]) -> Option<usize> {
         let fresh = Self::new(nodes);
-        if self.at != fresh.at || self.rows.len() != fresh.rows.len() {
-            return Some(0);
+        if self.at != fresh.at {
+            return Some(
+                self.at
+                    .iter()
+                    .zip(&fresh.at)
+                    .position(|(a, b)| a != b)
+                    .unwrap_or(0),
+            );
         }
-        let differs = self
-            .rows
-            .iter()
-            .zip(&fresh.rows)
-            .position(|(a, b)| a.to_bits() != b.to_bits())?;
-        // The node whose block starts last at or before the difference.
-        self.at
-            .iter()
-            .enumerate()
-            .filter(|&(_, &a)| a != NO_BLOCK && a as usize <= differs)
-            .max_by_key(|&(_, &a)| a)
-            .map(|(i, _)| i)
+        let same = |a: &Group<'_>, b: &Group<'_>| match (a, b) {
+            (Group::Four(a), Group::Four(b)) => bits_equal(a, b),
+            (Group::Eight(a), Group::Eight(b)) => bits_equal(a, b),
+            _ => false,
+        };
+        (0..nodes.len()).find(|&i| match (self.children(i), fresh.children(i)) {
+            (Some(a), Some(b)) => !same(&a, &b),
+            (None, None) => false,
+            _ => true,
+        })
     }
 }
 
-/// What lane `child` holds, field by field.
-fn lane_values(child: &Node) -> [f32; FIELDS] {
-    let mut v = [0.0f32; FIELDS];
+/// Whether two blocks hold the same bits.
+fn bits_equal<const N: usize>(a: &Block<N>, b: &Block<N>) -> bool {
+    a.norms == b.norms
+        && a.rows
+            .iter()
+            .flatten()
+            .zip(b.rows.iter().flatten())
+            .all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+/// The half-precision number at or above `q` (non-negative and finite):
+/// 0 stays 0, a positive `q` below the smallest normal half-precision
+/// number (`2^-14`) becomes that number, and a `q` above the largest
+/// (`65504`) becomes infinity, which no bound uses (harmonic norms lie in
+/// `[0, 1]` up to their rounding). Only normal numbers and 0 are stored,
+/// so that [`widen_half`] is a shift and an add.
+pub(crate) fn half_up(q: f32) -> u16 {
+    const MIN_NORMAL: f32 = 6.103_515_6e-5; // 2^-14
+    if !(q > 0.0) {
+        return 0;
+    }
+    if q > 65504.0 {
+        return 0x7c00;
+    }
+    let q = q.max(MIN_NORMAL);
+    let bits = q.to_bits();
+    // Exponent rebiased from 127 to 15, mantissa cut from 23 to 10 bits,
+    // one step up where bits were cut (a carry into the exponent is the
+    // next power of two, still correct).
+    let exponent = (bits >> 23) - 112;
+    let mantissa = (bits >> 13) & 0x3ff;
+    let cut = bits & 0x1fff;
+    let half = (exponent << 10 | mantissa) + u32::from(cut != 0);
+    half as u16
+}
+
+/// The `f32` value of half-precision bits from [`half_up`] (0 or normal):
+/// exact.
+#[inline(always)]
+pub(crate) fn widen_half(h: u16) -> f32 {
+    let h = u32::from(h);
+    // The exponent's bias 15 raised to 127: (127 - 15) << 23.
+    let bits = if h == 0 { 0 } else { (h << 13) + (112 << 23) };
+    f32::from_bits(bits)
+}
+
+/// What lane `child` holds, field by field: its `f32` rows and its
+/// harmonic norms' half-precision bits.
+fn lane_values(child: &Node) -> ([f32; ROWS], [u16; NORMS]) {
+    let mut v = [0.0f32; ROWS];
     let c = child.centroid;
     v[CENTROID..CENTROID + 3].copy_from_slice(&c.to_array());
     v[RADIUS] = child.radius;
@@ -162,16 +239,17 @@ fn lane_values(child: &Node) -> [f32; FIELDS] {
         v[BOX_LOW + axis] = low;
         v[BOX_HIGH + axis] = high;
     }
+    let mut norms = [0u16; NORMS];
     for k in 0..3 {
         v[OFFSETS + 3 * k..OFFSETS + 3 * k + 3]
             .copy_from_slice(&child.channel_offsets[k].to_array());
         v[COVARIANCES + 6 * k..COVARIANCES + 6 * k + 6]
             .copy_from_slice(&child.channel_covariances[k]);
         for d in 0..3 {
-            v[HARMONICS + 3 * k + d] = child.harmonic_norms[d][k];
+            norms[3 * k + d] = half_up(child.harmonic_norms[d][k]);
         }
     }
-    v
+    (v, norms)
 }
 
 /// `[min - c, max - c]` rounded outward to `f32`: the difference is taken
@@ -200,8 +278,9 @@ mod tests {
     use super::*;
     use crate::PointLight;
 
-    /// Every lane of every group holds its child's values, and the box
-    /// stored relative to the centroid contains every member.
+    /// Every lane of every group holds its child's values, the box stored
+    /// relative to the centroid contains every member, and the norms are
+    /// rounded up to half precision.
     #[test]
     fn groups_hold_their_childrens_values() {
         let mut state = 5u64;
@@ -217,7 +296,7 @@ mod tests {
             let tree = LightTree::build(&lights).unwrap();
             let mut checked = [0; 2];
             for (index, parent) in tree.nodes().iter().enumerate() {
-                let Some(group) = tree.groups.children(index, parent) else {
+                let Some(group) = tree.groups.children(index) else {
                     assert!(parent.is_leaf());
                     continue;
                 };
@@ -226,21 +305,23 @@ mod tests {
                     parent.children().len() <= 4
                 );
                 for (i, child) in tree.nodes()[parent.children()].iter().enumerate() {
-                    let lane = |field: usize| match group {
-                        Group::Four(b) => b[field][i],
-                        Group::Eight(b) => b[field][i],
+                    let (lane, norm) = match group {
+                        Group::Four(b) => (b.rows.map(|r| r[i]), b.norms.map(|r| r[i])),
+                        Group::Eight(b) => (b.rows.map(|r| r[i]), b.norms.map(|r| r[i])),
                     };
-                    assert_eq!(lane(RADIUS), child.radius);
-                    assert_eq!(lane(CENTROID + 2), child.centroid.z);
-                    assert_eq!(lane(COVARIANCES + 6 + 4), child.channel_covariances[1][4]);
-                    assert_eq!(lane(HARMONICS + 3 * 2 + 1), child.harmonic_norms[1][2]);
-                    assert_eq!(lane(OFFSETS + 3 + 2), child.channel_offsets[1].z);
+                    assert_eq!(lane[RADIUS], child.radius);
+                    assert_eq!(lane[CENTROID + 2], child.centroid.z);
+                    assert_eq!(lane[COVARIANCES + 6 + 4], child.channel_covariances[1][4]);
+                    assert_eq!(lane[OFFSETS + 3 + 2], child.channel_offsets[1].z);
+                    let q = child.harmonic_norms[1][2];
+                    let stored = widen_half(norm[3 * 2 + 1]);
+                    assert!(stored >= q && stored <= q.max(6.2e-5) * (1.0 + 1.0 / 1024.0));
                     for light in &tree.lights()[child.lights()] {
                         for axis in 0..3 {
                             let rel =
                                 f64::from(light.position[axis]) - f64::from(child.centroid[axis]);
-                            assert!(f64::from(lane(BOX_LOW + axis)) <= rel);
-                            assert!(f64::from(lane(BOX_HIGH + axis)) >= rel);
+                            assert!(f64::from(lane[BOX_LOW + axis]) <= rel);
+                            assert!(f64::from(lane[BOX_HIGH + axis]) >= rel);
                         }
                     }
                     checked[usize::from(matches!(group, Group::Eight(..)))] += 1;
@@ -249,5 +330,36 @@ mod tests {
             assert!(checked.iter().sum::<usize>() > 100, "{checked:?}");
             assert_eq!(tree.groups.first_mismatch(tree.nodes()), None);
         }
+    }
+
+    /// `half_up` rounds every `f32` in `[0, 65504]` up to a half-precision
+    /// number (0 and normal ones only), which `widen_half` reads back
+    /// exactly; no half-precision number lies strictly between.
+    #[test]
+    fn halves_round_up() {
+        let mut state = 9u64;
+        for i in 0..200_000 {
+            let q = if i < 1000 {
+                // Every half-precision value's neighbourhood near 1.
+                f32::from_bits(0x3f80_0000 - 500 * 8192 + i * 8192 + (i % 3))
+            } else {
+                let e = crate::testing::uniform(&mut state) * 40.0 - 30.0;
+                2f32.powf(e)
+            };
+            let h = half_up(q);
+            let back = widen_half(h);
+            assert!(back >= q, "{q} -> {back}");
+            assert!(h & 0x7c00 != 0 || h == 0, "{q}: subnormal {h:#x}");
+            if h > 0x0400 {
+                assert!(
+                    widen_half(h - 1) < q,
+                    "{q} -> {back}, one below {}",
+                    widen_half(h - 1)
+                );
+            }
+        }
+        assert_eq!(half_up(0.0), 0);
+        assert_eq!(widen_half(half_up(1.0)), 1.0);
+        assert_eq!(widen_half(half_up(1e-9)), 6.103_515_6e-5);
     }
 }

@@ -319,9 +319,10 @@ impl fmt::Debug for LightTree {
 
 impl LightTree {
     /// Asks the processor to start loading what refining node `index` will
-    /// read (its children's records, or its lights): issued for the node the
-    /// cut will probably refine next while it evaluates the current one, so
-    /// that the loads overlap the work instead of stalling it.
+    /// read (its children's records and their block of statistics side by
+    /// side, or its lights): issued for the node the cut will probably
+    /// refine next while it evaluates the current one, so that the loads
+    /// overlap the work instead of stalling it.
     #[inline]
     pub(crate) fn prefetch_refinement(&self, index: usize) {
         if self.nodes.len() < PREFETCH_MIN_NODES {
@@ -330,13 +331,17 @@ impl LightTree {
         let Some(node) = self.nodes.get(index) else {
             return;
         };
-        let bytes = if node.is_leaf() {
+        if node.is_leaf() {
             let lights = self.lights.get(node.lights()).unwrap_or(&[]);
-            as_bytes_range(lights)
+            prefetch(as_bytes_range(lights));
         } else {
-            as_bytes_range(self.nodes.get(node.children()).unwrap_or(&[]))
-        };
-        prefetch(bytes);
+            prefetch(as_bytes_range(
+                self.nodes.get(node.children()).unwrap_or(&[]),
+            ));
+            if let Some(group) = self.groups.children(index) {
+                prefetch(group.bytes());
+            }
+        }
     }
 }
 
