@@ -177,7 +177,8 @@ impl TreeBuilder {
                 max: u32::MAX as usize,
             });
         }
-        check_lights(lights, pool.cheap(lights.len()))?;
+        // The checks and the scene's box in one read of the lights.
+        let scene = check_and_bound(lights, pool.cheap(lights.len()))?;
 
         let n = lights.len();
         let mut tree = LightTree {
@@ -195,14 +196,6 @@ impl TreeBuilder {
         // order: every octree cell is then a contiguous run, and every later
         // pass over a node's lights reads memory in sequence.
         let cheap = pool.cheap(n);
-        let scene = cheap
-            .map(&chunks(n, cheap), |r| {
-                lights[r.clone()]
-                    .iter()
-                    .fold(Aabb::EMPTY, |b, l| b.union_point(l.position))
-            })
-            .into_iter()
-            .fold(Aabb::EMPTY, Aabb::union);
         let grid = morton::Grid::over(scene);
         let codes = cheap.map(lights, |l| grid.code(l.position));
         // Median splits reorder lights within a run of equal codes only, so
@@ -276,10 +269,44 @@ fn chunks(n: usize, pool: Pool) -> Vec<core::ops::Range<usize>> {
 /// The first light that cannot be built, as [`BuildError`], checked in
 /// parts on `pool` (the first failing part's first error).
 pub(super) fn check_lights(lights: &[PointLight], pool: Pool) -> Result<(), BuildError> {
-    let errors = pool.map(&chunks(lights.len(), pool), |r| {
-        check_range(&lights[r.clone()]).map_err(|e| shifted(e, r.start))
+    check_and_bound(lights, pool).map(|_| ())
+}
+
+/// [`check_lights`], and the box of the lights when they can be built: one
+/// read of the lights, in parts on `pool`.
+fn check_and_bound(lights: &[PointLight], pool: Pool) -> Result<Aabb, BuildError> {
+    let parts = pool.map(&chunks(lights.len(), pool), |r| {
+        let part = &lights[r.clone()];
+        let (aabb, valid) = bound_part(part);
+        if valid {
+            Ok(aabb)
+        } else {
+            // Some light is bad: the slower check names the first.
+            check_range(part).map_err(|e| shifted(e, r.start))?;
+            debug_assert!(false, "bound_part accepts exactly what check_range accepts");
+            Ok(aabb)
+        }
     });
-    errors.into_iter().collect()
+    parts
+        .into_iter()
+        .try_fold(Aabb::EMPTY, |b, part| Ok(b.union(part?)))
+}
+
+/// The box of `lights` and whether every light passes [`check_range`],
+/// without a branch per light: a coordinate passes when its magnitude is
+/// at most [`PointLight::MAX_COORDINATE`] (false for NaN and infinities),
+/// an intensity channel when it lies in `[0, f32::MAX]` (false for NaN,
+/// infinities and negative values; `-0` passes, as there).
+fn bound_part(lights: &[PointLight]) -> (Aabb, bool) {
+    let max = Vec3::splat(PointLight::MAX_COORDINATE);
+    let mut aabb = Aabb::EMPTY;
+    let mut valid = true;
+    for l in lights {
+        let (p, i) = (l.position, l.intensity);
+        valid &= p.abs().cmple(max).all() & i.cmpge(Vec3::ZERO).all() & i.cmple(Vec3::MAX).all();
+        aabb = aabb.union_point(p);
+    }
+    (aabb, valid)
 }
 
 /// `error` with the light's index moved up by `by`.
@@ -1021,6 +1048,58 @@ mod tests {
                     (sum - expected).abs() <= 2048.0 * f64::EPSILON * scale,
                     "degree {l}: {sum} against {expected}"
                 );
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod checks {
+    use glam::Vec3;
+
+    use super::{bound_part, check_range};
+    use crate::PointLight;
+
+    /// The branch-free check accepts exactly the lights that the checks
+    /// one by one accept, on the edges of each condition.
+    #[test]
+    fn the_fast_check_accepts_what_the_checks_accept() {
+        let max = PointLight::MAX_COORDINATE;
+        let coordinates = [
+            0.0,
+            -0.0,
+            1.5,
+            -max,
+            max,
+            f32::from_bits(max.to_bits() + 1),
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        let channels = [
+            0.0,
+            -0.0,
+            2.0,
+            f32::MAX,
+            -f32::MIN_POSITIVE,
+            -1.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        for (a, &c) in coordinates.iter().enumerate() {
+            for (b, &i) in channels.iter().enumerate() {
+                for axis in 0..3 {
+                    let mut light = PointLight::new(Vec3::ONE, Vec3::ONE);
+                    light.position[axis] = c;
+                    light.intensity[(axis + a + b) % 3] = i;
+                    let lights = [PointLight::default(), light];
+                    assert_eq!(
+                        bound_part(&lights).1,
+                        check_range(&lights).is_ok(),
+                        "coordinate {c}, channel {i}"
+                    );
+                }
             }
         }
     }
