@@ -152,7 +152,7 @@ impl TreeBuilder {
     /// The node statistics (sums, radii and moments), most of a build's
     /// work, are computed subtree by subtree side by side (the calling
     /// thread takes subtrees too), then the few nodes above those subtrees;
-    /// from 32,768 lights on. The lighter passes (the checks, the Morton
+    /// from 8,192 lights on. The lighter passes (the checks, the Morton
     /// codes, the sort's buckets, the gathering of the lights and the
     /// planes) run in parallel from 524,288 lights on, below which waking
     /// the pool's threads costs more than they gain. The split into nodes
