@@ -50,8 +50,8 @@ impl Grid {
         }
         // largest < 2^(exponent + 1); cells of 2^(exponent + 1 - GRID_BITS).
         let exponent = ((largest.to_bits() >> 52) & 0x7ff) as i32 - 1023;
-        let scale = power_of_two(GRID_BITS - 1 - exponent);
-        (scale.is_finite() && scale > 0.0).then_some(Self { scale })
+        let scale = power_of_two(GRID_BITS - 1 - exponent)?;
+        Some(Self { scale })
     }
 
     /// The integer coordinates of an `f32`-valued point, `None` when a
@@ -82,14 +82,12 @@ impl Grid {
 /// `2^GRID_BITS`, the bound of a grid's integer coordinates.
 const GRID_LIMIT: f64 = (1u64 << GRID_BITS) as f64;
 
-/// `2^k`, exactly: built from its bits in `f64`'s normal range, by `powi`
-/// (which rounds to 0 or infinity) outside it.
-fn power_of_two(k: i32) -> f64 {
-    if (-1022..=1023).contains(&k) {
-        f64::from_bits(((k + 1023) as u64) << 52)
-    } else {
-        2.0f64.powi(k)
-    }
+/// `2^k` built from its bits, `None` outside `f64`'s normal range (for an
+/// `f32` coordinate's grid `k` lies in `[-88, 188]`).
+fn power_of_two(k: i32) -> Option<f64> {
+    (-1022..=1023)
+        .contains(&k)
+        .then(|| f64::from_bits(((k + 1023) as u64) << 52))
 }
 
 /// Integer coordinates of `f32`-valued points on the [`Grid`] of their
@@ -350,7 +348,8 @@ mod tests {
     #[test]
     fn powers_of_two_are_exact() {
         for k in -1100..1100 {
-            assert_eq!(power_of_two(k), 2.0f64.powi(k), "2^{k}");
+            let normal = (-1022..=1023).contains(&k);
+            assert_eq!(power_of_two(k), normal.then(|| 2.0f64.powi(k)), "2^{k}");
         }
     }
 
