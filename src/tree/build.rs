@@ -5,7 +5,7 @@ use core::ops::{Add, Mul, Sub};
 
 use glam::{DVec3, Vec3};
 
-use super::layout::{LightTree, Node};
+use super::layout::{LightTree, MAX_CHILDREN, Node};
 use super::moments::{LeafScratch, Moments, Statistics};
 use super::morton;
 use super::pool::Pool;
@@ -149,16 +149,15 @@ impl TreeBuilder {
     /// [`build`](Self::build) spread over rayon's thread pool (with the
     /// `rayon` feature): the same tree, bit for bit, and the same errors.
     ///
-    /// The moments, most of a build's work, are computed subtree by subtree
-    /// side by side (the calling thread takes subtrees too), then the few
-    /// nodes above those subtrees; from 32,768 lights on. The lighter passes (the checks, the Morton codes, the
-    /// sort's buckets, the gathering of the lights, the radii and the
+    /// The node statistics (sums, radii and moments), most of a build's
+    /// work, are computed subtree by subtree side by side (the calling
+    /// thread takes subtrees too), then the few nodes above those subtrees;
+    /// from 8,192 lights on. The lighter passes (the checks, the Morton
+    /// codes, the sort's buckets, the gathering of the lights and the
     /// planes) run in parallel from 524,288 lights on, below which waking
     /// the pool's threads costs more than they gain. The split into nodes
     /// stays on the calling thread. A pool of one thread builds on the
-    /// calling thread. The subtrees' statistics wait in buffers until they
-    /// are stored, about 150 bytes per node more at the peak (some 22 bytes
-    /// per light on the street city).
+    /// calling thread.
     ///
     /// # Errors
     /// As [`build`](Self::build).
@@ -177,7 +176,8 @@ impl TreeBuilder {
                 max: u32::MAX as usize,
             });
         }
-        check_lights(lights, pool.cheap(lights.len()))?;
+        // The checks and the scene's box in one read of the lights.
+        let scene = check_and_bound(lights, pool.cheap(lights.len()))?;
 
         let n = lights.len();
         let mut tree = LightTree {
@@ -196,14 +196,6 @@ impl TreeBuilder {
         // order: every octree cell is then a contiguous run, and every later
         // pass over a node's lights reads memory in sequence.
         let cheap = pool.cheap(n);
-        let scene = cheap
-            .map(&chunks(n, cheap), |r| {
-                lights[r.clone()]
-                    .iter()
-                    .fold(Aabb::EMPTY, |b, l| b.union_point(l.position))
-            })
-            .into_iter()
-            .fold(Aabb::EMPTY, Aabb::union);
         let grid = morton::Grid::over(scene);
         let codes = cheap.map(lights, |l| grid.code(l.position));
         // Median splits reorder lights within a run of equal codes only, so
@@ -278,10 +270,44 @@ fn chunks(n: usize, pool: Pool) -> Vec<core::ops::Range<usize>> {
 /// The first light that cannot be built, as [`BuildError`], checked in
 /// parts on `pool` (the first failing part's first error).
 pub(super) fn check_lights(lights: &[PointLight], pool: Pool) -> Result<(), BuildError> {
-    let errors = pool.map(&chunks(lights.len(), pool), |r| {
-        check_range(&lights[r.clone()]).map_err(|e| shifted(e, r.start))
+    check_and_bound(lights, pool).map(|_| ())
+}
+
+/// [`check_lights`], and the box of the lights when they can be built: one
+/// read of the lights, in parts on `pool`.
+fn check_and_bound(lights: &[PointLight], pool: Pool) -> Result<Aabb, BuildError> {
+    let parts = pool.map(&chunks(lights.len(), pool), |r| {
+        let part = &lights[r.clone()];
+        let (aabb, valid) = bound_part(part);
+        if valid {
+            Ok(aabb)
+        } else {
+            // Some light is bad: the slower check names the first.
+            check_range(part).map_err(|e| shifted(e, r.start))?;
+            debug_assert!(false, "bound_part accepts exactly what check_range accepts");
+            Ok(aabb)
+        }
     });
-    errors.into_iter().collect()
+    parts
+        .into_iter()
+        .try_fold(Aabb::EMPTY, |b, part| Ok(b.union(part?)))
+}
+
+/// The box of `lights` and whether every light passes [`check_range`],
+/// without a branch per light: a coordinate passes when its magnitude is
+/// at most [`PointLight::MAX_COORDINATE`] (false for NaN and infinities),
+/// an intensity channel when it lies in `[0, f32::MAX]` (false for NaN,
+/// infinities and negative values; `-0` passes, as there).
+fn bound_part(lights: &[PointLight]) -> (Aabb, bool) {
+    let max = Vec3::splat(PointLight::MAX_COORDINATE);
+    let mut aabb = Aabb::EMPTY;
+    let mut valid = true;
+    for l in lights {
+        let (p, i) = (l.position, l.intensity);
+        valid &= p.abs().cmple(max).all() & i.cmpge(Vec3::ZERO).all() & i.cmple(Vec3::MAX).all();
+        aabb = aabb.union_point(p);
+    }
+    (aabb, valid)
 }
 
 /// `error` with the light's index moved up by `by`.
@@ -548,144 +574,339 @@ impl Shape {
 /// which reads a few leaves per node), for a tree whose topology is set:
 /// children hold larger indices than their parent.
 ///
-/// 1. Intensities, weights, weighted positions and boxes, children before
-///    parents (the sums of a node are its children's sums), then centroids.
-/// 2. Radii: the largest distance from the centroid to a member, level by
-///    level from the deepest (see [`farthest_member`]).
+/// One depth-first pass, children before their parent, so that a
+/// subtree's lights are read while they are in the cache:
+///
+/// 1. A leaf sums its lights' intensities, weights, weighted positions and
+///    box; any other node its children's sums. Then the centroid.
+/// 2. The radius: the largest distance from the centroid to a member (a
+///    leaf's over its lights; any other node's found through its subtree,
+///    see [`farthest_member`]).
 /// 3. Moments up to degree 5 (see [`Moments`]): summed directly over each
 ///    leaf's lights, shifted from the children's centroids to the parent's
-///    for every other node, depth first so that only one path's moments
-///    are held at a time.
-// Calling the AVX2 copy is one of the crate's unsafe blocks (see
-// `dispatch`).
-#[allow(unsafe_code)]
+///    for every other node; a node's children's moments wait in one buffer
+///    per level of the path until its centroid is known (eight moments of
+///    about 2 KiB a level: some 350 KiB for a tree 20 levels deep, per
+///    thread).
+///
+/// On a pool, disjoint subtrees are done side by side (each node by the
+/// same operations in the same order as on one thread), then the few nodes
+/// above them.
 pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
     let (lights, nodes) = (&tree.lights, &mut tree.nodes);
     if nodes.is_empty() {
         return;
     }
+    let mut scratch = StatisticsScratch::new();
+    if !pool.parallel() {
+        let mut levels = Levels::split(nodes, &[0]).pop().expect("one subtree");
+        fill_subtree(&mut levels, lights, &mut scratch);
+        return;
+    }
+    let roots = subtrees(nodes, pool.parts());
+    let subtrees = Levels::split(nodes, &roots);
+    let done = pool.map_owned(subtrees, StatisticsScratch::new, |scratch, mut levels| {
+        let (sums, moments) = fill_subtree(&mut levels, lights, scratch);
+        Done {
+            root: levels.root() as u32,
+            sums,
+            moments: *moments,
+        }
+    });
+    let mut done = done;
+    done.sort_unstable_by_key(|d| d.root);
+    let mut levels = Levels::split(nodes, &[0]).pop().expect("one subtree");
+    levels.done = &done;
+    fill_subtree(&mut levels, lights, &mut scratch);
+}
+
+/// A node's sums that its parent's are made of, in `f64`: its members'
+/// summed weight, weighted position and plain position.
+type Sums = (f64, DVec3, DVec3);
+
+/// A subtree whose statistics are done: its root, the root's sums and its
+/// moments about its centroid.
+struct Done {
+    root: u32,
+    sums: Sums,
+    moments: Moments,
+}
+
+/// Mutable access to one subtree's nodes, level by level. In breadth-first
+/// order a node's descendants at each depth are one contiguous run, so
+/// disjoint subtrees own disjoint runs.
+struct Levels<'a> {
+    /// Per level below the subtree's root (the root's first): the index of
+    /// the run's first node, and the run.
+    runs: Vec<(usize, &'a mut [Node])>,
+    /// Subtrees below this one whose statistics are done, by root (the
+    /// pass stops there); empty but for the nodes above a pool's subtrees.
+    done: &'a [Done],
+}
+
+impl<'a> Levels<'a> {
+    /// The subtrees of `roots` (disjoint: none holds another), each as its
+    /// runs of `nodes`.
+    fn split(nodes: &'a mut [Node], roots: &[u32]) -> Vec<Self> {
+        // Every subtree's runs, with the subtree they belong to: a run
+        // below the last is from the first child of its first inner node
+        // to the last child of its last.
+        let mut runs = Vec::new();
+        for (k, &root) in roots.iter().enumerate() {
+            let mut run = root as usize..root as usize + 1;
+            loop {
+                runs.push((run.start, run.end, k));
+                let level = &nodes[run.clone()];
+                let Some(first) = level.iter().find(|n| !n.is_leaf()) else {
+                    break;
+                };
+                let last = level.iter().rev().find(|n| !n.is_leaf()).unwrap_or(first);
+                run = first.children().start..last.children().end;
+            }
+        }
+        runs.sort_unstable();
+        let mut out: Vec<Self> = roots
+            .iter()
+            .map(|_| Self {
+                runs: Vec::new(),
+                done: &[],
+            })
+            .collect();
+        // Runs in the order of the array: each subtree's come shallowest
+        // first.
+        let (mut rest, mut offset) = (nodes, 0);
+        for (start, end, k) in runs {
+            let (_, tail) = rest.split_at_mut(start - offset);
+            let (run, tail) = tail.split_at_mut(end - start);
+            out[k].runs.push((start, run));
+            (rest, offset) = (tail, end);
+        }
+        out
+    }
+
+    /// Index of the subtree's root.
+    fn root(&self) -> usize {
+        self.runs[0].0
+    }
+
+    /// Node `index`, at `depth` levels below the subtree's root.
+    #[inline(always)]
+    fn node(&self, depth: usize, index: usize) -> &Node {
+        let (start, run) = &self.runs[depth];
+        &run[index - start]
+    }
+
+    /// See [`node`](Self::node).
+    #[inline(always)]
+    fn node_mut(&mut self, depth: usize, index: usize) -> &mut Node {
+        let (start, run) = &mut self.runs[depth];
+        &mut run[index - *start]
+    }
+
+    /// The statistics of the subtree of `index` if they are done.
+    #[inline(always)]
+    fn done(&self, index: usize) -> Option<&Done> {
+        if self.done.is_empty() {
+            return None;
+        }
+        let k = self
+            .done
+            .binary_search_by_key(&(index as u32), |d| d.root)
+            .ok()?;
+        Some(&self.done[k])
+    }
+}
+
+/// What one thread's pass over subtrees reuses: the moments of the root,
+/// the buffers of the children's moments (one per level of a path) and the
+/// leaves' scratch.
+struct StatisticsScratch {
+    root: Moments,
+    children: Vec<[Moments; MAX_CHILDREN]>,
+    leaf: LeafScratch,
+}
+
+impl StatisticsScratch {
+    /// Empty buffers, grown to the depth of the first subtree filled.
+    fn new() -> Self {
+        Self {
+            root: Moments::ZERO,
+            children: Vec::new(),
+            leaf: LeafScratch::new(),
+        }
+    }
+}
+
+/// Fills the statistics of the subtree of `levels` (see
+/// [`fill_statistics`]); returns its root's sums and moments.
+// Calling the AVX2 copy is one of the crate's unsafe blocks (see
+// `dispatch`).
+#[allow(unsafe_code)]
+fn fill_subtree<'s>(
+    levels: &mut Levels<'_>,
+    lights: &[PointLight],
+    scratch: &'s mut StatisticsScratch,
+) -> (Sums, &'s Moments) {
+    let depth = levels.runs.len();
+    if scratch.children.len() < depth {
+        scratch
+            .children
+            .resize(depth, [Moments::ZERO; MAX_CHILDREN]);
+    }
+    let root = levels.root();
+    let StatisticsScratch {
+        root: out,
+        children,
+        leaf,
+    } = scratch;
     #[cfg(target_arch = "x86_64")]
     {
         if crate::dispatch::avx2_fma() {
             // SAFETY: the processor has AVX2 and FMA (`dispatch::avx2_fma`
             // checked).
-            unsafe { fill_sums_avx2(nodes, lights, 0) };
-        } else {
-            fill_sums(nodes, lights, 0);
+            let sums = unsafe { fill_node_avx2(levels, lights, 0, root, out, children, leaf) };
+            return (sums, out);
         }
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    fill_sums(nodes, lights, 0);
-    fill_radii(nodes, lights, pool.cheap(lights.len()));
-    // One buffer per level of a path.
-    let levels = tree.depth as usize + 1;
-    let path = || vec![Moments::ZERO; levels];
-    if !pool.parallel() {
-        let mut in_place = InPlace { nodes, done: &[] };
-        fill_moments(
-            &mut in_place,
-            lights,
-            0,
-            &mut path(),
-            &mut LeafScratch::new(),
-        );
-        return;
-    }
-    // Subtrees side by side, their statistics collected, then stored; then
-    // the nodes above them, from the subtrees' moments. Each node's
-    // moments are computed by the same operations in the same order as on
-    // one thread.
-    let roots = subtrees(nodes, pool.parts());
-    let shared: &[Node] = nodes;
-    let parts = pool.map_shared(&roots, |&root| {
-        let mut collect = Collect {
-            nodes: shared,
-            out: Vec::new(),
-        };
-        let mut path = path();
-        let scratch = &mut LeafScratch::new();
-        fill_moments(&mut collect, lights, root as usize, &mut path, scratch);
-        (root, path.swap_remove(0), collect.out)
-    });
-    let mut done = Vec::with_capacity(parts.len());
-    for (root, moments, statistics) in parts {
-        for (index, stats) in statistics {
-            store(&mut nodes[index as usize], stats);
-        }
-        done.push((root, moments));
-    }
-    done.sort_unstable_by_key(|d| d.0);
-    let scratch = &mut LeafScratch::new();
-    fill_moments(
-        &mut InPlace { nodes, done: &done },
-        lights,
-        0,
-        &mut path(),
-        scratch,
-    );
+    let sums = fill_node_baseline(levels, lights, 0, root, out, children, leaf);
+    (sums, out)
 }
 
-/// Every node's radius, its largest distance from its centroid to a
-/// member, rounded up: the nodes of each level after those of the level
-/// below (their children), the nodes of a level side by side on the pool.
-// Calling the AVX2 copy is one of the crate's unsafe blocks (see
-// `dispatch`).
-#[allow(unsafe_code)]
-fn fill_radii(nodes: &mut [Node], lights: &[PointLight], pool: Pool) {
-    // Breadth-first order: each level is a contiguous run of nodes, the
-    // next one running to the last child of its last parent.
-    let mut levels = vec![0, 1];
-    loop {
-        let (start, end) = (levels[levels.len() - 2], levels[levels.len() - 1]);
-        let next = nodes[start..end]
-            .iter()
-            .filter(|n| !n.is_leaf())
-            .map(|n| n.children().end)
-            .max();
-        match next {
-            Some(next) => levels.push(next),
-            None => break,
+/// Statistics of node `index` (`depth` levels below the subtree's root)
+/// and its descendants, children before parents; the node's moments about
+/// its centroid into `out`, its children's into `below[0]` (their
+/// children's one level down), and its sums returned. `$recurse` is the
+/// function itself (one per compiled copy).
+macro_rules! fill_node_body {
+    ($recurse:ident, $levels:ident, $lights:ident, $depth:ident, $index:ident, $out:ident, $below:ident, $scratch:ident) => {{
+        if let Some(done) = $levels.done($index) {
+            *$out = done.moments;
+            return done.sums;
         }
-    }
-    debug_assert_eq!(levels.last(), Some(&nodes.len()));
-    for level in levels.windows(2).rev() {
-        let (above, below) = nodes.split_at_mut(level[1]);
-        let (level_nodes, first_below) = (&mut above[level[0]..], level[1]);
-        let radius = |node: &mut Node| {
-            let radius_sq = farthest_member(node, lights, below, first_below);
-            node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
+        let node = $levels.node($depth, $index);
+        let (members, children, count) = (node.lights(), node.children(), node.light_count);
+        let mut intensity = DVec3::ZERO;
+        let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
+        let mut aabb = Aabb::EMPTY;
+        let (kids, below) = if children.is_empty() {
+            for l in &$lights[members.clone()] {
+                let w = f64::from(l.weight());
+                let x = l.position.as_dvec3();
+                intensity += l.intensity.as_dvec3();
+                weight += w;
+                weighted += w * x;
+                plain += x;
+                aabb = aabb.union_point(l.position);
+            }
+            (None, $below)
+        } else {
+            let (kids, below) = $below
+                .split_first_mut()
+                .expect("one buffer per level of the tree");
+            let mut sums = [(0.0, DVec3::ZERO, DVec3::ZERO); MAX_CHILDREN];
+            for ((k, kid), sum) in children.clone().zip(kids.iter_mut()).zip(&mut sums) {
+                *sum = $recurse($levels, $lights, $depth + 1, k, kid, below, $scratch);
+            }
+            for (k, (w, wx, x)) in children.clone().zip(sums) {
+                let child = $levels.node($depth + 1, k);
+                intensity += child.intensity;
+                weight += w;
+                weighted += wx;
+                plain += x;
+                aabb = aabb.union(child.aabb);
+            }
+            (Some(kids), below)
         };
-        if pool.parallel() {
-            pool.for_each_mut(level_nodes, radius);
-            continue;
-        }
-        #[cfg(target_arch = "x86_64")]
+        let _ = below;
+        // Zero total weight: every member is dark; use the plain mean so the
+        // node still has a sensible position (its contribution is zero either
+        // way).
+        let centroid = if weight > 0.0 {
+            weighted / weight
+        } else {
+            plain / f64::from(count)
+        };
         {
-            if crate::dispatch::avx2_fma() {
-                // SAFETY: the processor has AVX2 and FMA
-                // (`dispatch::avx2_fma` checked).
-                unsafe { fill_radii_avx2(level_nodes, &radius) };
-                continue;
+            let node = $levels.node_mut($depth, $index);
+            node.intensity = intensity;
+            node.weight = (weight as f32).min(f32::MAX);
+            // The average lies in the box in exact arithmetic; clamp away
+            // rounding.
+            node.centroid = centroid.as_vec3().clamp(aabb.min, aabb.max);
+            node.aabb = aabb;
+        }
+        let radius_sq = farthest_member($levels, $lights, $depth, $index);
+        let node = $levels.node_mut($depth, $index);
+        node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
+        let (c, radius) = (node.centroid.as_dvec3(), node.radius);
+        match kids {
+            None => $out.set_to_lights(&$lights[members], c, $scratch),
+            Some(kids) => {
+                $out.clear();
+                for (k, kid) in children.zip(kids.iter_mut()) {
+                    let t = $levels.node($depth + 1, k).centroid.as_dvec3() - c;
+                    kid.shift_into(t, $out);
+                }
             }
         }
-        level_nodes.iter_mut().for_each(radius);
-    }
+        let stats = $out.statistics(intensity, radius, count as usize);
+        store($levels.node_mut($depth, $index), stats);
+        (weight, weighted, plain)
+    }};
 }
 
-/// `radius` of every node, compiled for AVX2 and FMA (nothing to fuse:
-/// the same bits).
+/// See [`fill_node_body`]: the baseline copy.
+fn fill_node_baseline(
+    levels: &mut Levels<'_>,
+    lights: &[PointLight],
+    depth: usize,
+    index: usize,
+    out: &mut Moments,
+    below: &mut [[Moments; MAX_CHILDREN]],
+    scratch: &mut LeafScratch,
+) -> Sums {
+    fill_node_body!(
+        fill_node_baseline,
+        levels,
+        lights,
+        depth,
+        index,
+        out,
+        below,
+        scratch
+    )
+}
+
+/// [`fill_node_baseline`] compiled for AVX2 and FMA (the same bits, see
+/// [`dispatch`](crate::dispatch)).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn fill_radii_avx2(nodes: &mut [Node], radius: &impl Fn(&mut Node)) {
-    for node in nodes {
-        radius(node);
-    }
+fn fill_node_avx2(
+    levels: &mut Levels<'_>,
+    lights: &[PointLight],
+    depth: usize,
+    index: usize,
+    out: &mut Moments,
+    below: &mut [[Moments; MAX_CHILDREN]],
+    scratch: &mut LeafScratch,
+) -> Sums {
+    fill_node_body!(
+        fill_node_avx2,
+        levels,
+        lights,
+        depth,
+        index,
+        out,
+        below,
+        scratch
+    )
 }
 
-/// The largest squared distance, as computed in `f64`, from `node`'s
-/// centroid to a member light: the same value as over all its lights, but
-/// subtrees that cannot hold a farther member are skipped. `below` holds
-/// the nodes from index `first_below` on, with their radii already set.
+/// The largest squared distance, as computed in `f64`, from the centroid
+/// of node `index` (`depth` levels below the subtree's root) to a member
+/// light: the same value as over all its lights, but subtrees that cannot
+/// hold a farther member are skipped. Its descendants' statistics are
+/// set.
 ///
 /// A member `x` of a subtree with centroid `c'`, stored radius `r'` (at
 /// least its members' exact distances) and box `B` lies within `|c' - c| +
@@ -696,8 +917,9 @@ fn fill_radii_avx2(nodes: &mut [Node], radius: &impl Fn(&mut Node)) {
 /// largest computed value so far holds no larger one. Subtrees are taken
 /// farthest bound first, depth first.
 #[inline(always)]
-fn farthest_member(node: &Node, lights: &[PointLight], below: &[Node], first_below: usize) -> f64 {
+fn farthest_member(levels: &Levels<'_>, lights: &[PointLight], depth: usize, index: usize) -> f64 {
     const MARGIN: f64 = 1.0 + 1.0 / 1_099_511_627_776.0; // 1 + 2^-40
+    let node = levels.node(depth, index);
     let c = node.centroid.as_dvec3();
     let squared = |members: &[PointLight]| {
         members
@@ -709,32 +931,36 @@ fn farthest_member(node: &Node, lights: &[PointLight], below: &[Node], first_bel
         return squared(&lights[node.lights()]);
     }
     let mut best = 0.0f64;
-    // Subtrees still to search, with the bounds of their members' squared
-    // distances.
-    type Stack = smallvec::SmallVec<[(u32, f64); 64]>;
-    let push_children = |stack: &mut Stack, n: &Node| {
+    // Subtrees still to search (index and depth), with the bounds of their
+    // members' squared distances.
+    type Stack = smallvec::SmallVec<[(u32, u32, f64); 64]>;
+    let push_children = |stack: &mut Stack, n: &Node, depth: usize| {
         let start = stack.len();
         for k in n.children() {
-            let child = &below[k - first_below];
+            let child = levels.node(depth + 1, k);
             let reach = (child.centroid.as_dvec3() - c).length() * MARGIN + f64::from(child.radius);
             let (lo, hi) = (child.aabb.min.as_dvec3() - c, child.aabb.max.as_dvec3() - c);
             let corner = (lo * lo).max(hi * hi).element_sum();
-            stack.push((k as u32, (reach * reach).min(corner) * MARGIN));
+            stack.push((
+                k as u32,
+                (depth + 1) as u32,
+                (reach * reach).min(corner) * MARGIN,
+            ));
         }
         // The farthest bound on top.
-        stack[start..].sort_unstable_by(|a, b| a.1.total_cmp(&b.1));
+        stack[start..].sort_unstable_by(|a, b| a.2.total_cmp(&b.2));
     };
     let mut stack = Stack::new();
-    push_children(&mut stack, node);
-    while let Some((k, bound)) = stack.pop() {
+    push_children(&mut stack, node, depth);
+    while let Some((k, d, bound)) = stack.pop() {
         if bound < best {
             continue;
         }
-        let n = &below[k as usize - first_below];
+        let n = levels.node(d as usize, k as usize);
         if n.is_leaf() {
             best = best.max(squared(&lights[n.lights()]));
         } else {
-            push_children(&mut stack, n);
+            push_children(&mut stack, n, d as usize);
         }
     }
     best
@@ -763,129 +989,6 @@ fn subtrees(nodes: &[Node], parts: usize) -> Vec<u32> {
     roots
 }
 
-/// Intensity, weight, centroid and box of node `index` and its
-/// descendants, children before parents; returns the node's summed weight,
-/// weighted position and plain position. Depth first, so that the leaves
-/// read the lights in order. `$recurse` is the function itself (one per
-/// compiled copy).
-macro_rules! fill_sums_body {
-    ($recurse:ident, $nodes:ident, $lights:ident, $index:ident) => {{
-        let node = &$nodes[$index];
-        let mut intensity = DVec3::ZERO;
-        let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
-        let mut aabb = Aabb::EMPTY;
-        if node.is_leaf() {
-            for l in &$lights[node.lights()] {
-                let w = f64::from(l.weight());
-                let x = l.position.as_dvec3();
-                intensity += l.intensity.as_dvec3();
-                weight += w;
-                weighted += w * x;
-                plain += x;
-                aabb = aabb.union_point(l.position);
-            }
-        } else {
-            for c in node.children() {
-                let (w, wx, x) = $recurse($nodes, $lights, c);
-                intensity += $nodes[c].intensity;
-                weight += w;
-                weighted += wx;
-                plain += x;
-                aabb = aabb.union($nodes[c].aabb);
-            }
-        }
-        let node = &mut $nodes[$index];
-        // Zero total weight: every member is dark; use the plain mean so the
-        // node still has a sensible position (its contribution is zero either
-        // way).
-        let centroid = if weight > 0.0 {
-            weighted / weight
-        } else {
-            plain / f64::from(node.light_count)
-        };
-        node.intensity = intensity;
-        node.weight = (weight as f32).min(f32::MAX);
-        // The average lies in the box in exact arithmetic; clamp away rounding.
-        node.centroid = centroid.as_vec3().clamp(aabb.min, aabb.max);
-        node.aabb = aabb;
-        (weight, weighted, plain)
-    }};
-}
-
-/// See [`fill_sums_body`].
-#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
-fn fill_sums(nodes: &mut [Node], lights: &[PointLight], index: usize) -> (f64, DVec3, DVec3) {
-    fill_sums_body!(fill_sums, nodes, lights, index)
-}
-
-/// [`fill_sums`] compiled for AVX2 and FMA (no product is fused here: the
-/// same bits).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn fill_sums_avx2(nodes: &mut [Node], lights: &[PointLight], index: usize) -> (f64, DVec3, DVec3) {
-    fill_sums_body!(fill_sums_avx2, nodes, lights, index)
-}
-
-/// Where the moments' recursion reads the nodes and puts their statistics.
-trait Access {
-    fn nodes(&self) -> &[Node];
-    fn store(&mut self, index: usize, stats: Statistics);
-    /// The moments of node `index` if they were computed elsewhere (a
-    /// subtree done on another thread): the recursion stops there.
-    #[inline(always)]
-    fn done(&self, index: usize) -> Option<&Moments> {
-        let _ = index;
-        None
-    }
-}
-
-/// Statistics stored in the nodes as they are computed, except below the
-/// roots of subtrees whose moments are `done` (by root index; none on one
-/// thread).
-struct InPlace<'a> {
-    nodes: &'a mut [Node],
-    done: &'a [(u32, Moments)],
-}
-
-impl Access for InPlace<'_> {
-    #[inline(always)]
-    fn nodes(&self) -> &[Node] {
-        self.nodes
-    }
-    #[inline(always)]
-    fn store(&mut self, index: usize, stats: Statistics) {
-        store(&mut self.nodes[index], stats);
-    }
-    #[inline(always)]
-    fn done(&self, index: usize) -> Option<&Moments> {
-        if self.done.is_empty() {
-            return None;
-        }
-        let k = self
-            .done
-            .binary_search_by_key(&(index as u32), |d| d.0)
-            .ok()?;
-        Some(&self.done[k].1)
-    }
-}
-
-/// Statistics of one subtree collected, the nodes shared between threads.
-struct Collect<'a> {
-    nodes: &'a [Node],
-    out: Vec<(u32, Statistics)>,
-}
-
-impl Access for Collect<'_> {
-    #[inline(always)]
-    fn nodes(&self) -> &[Node] {
-        self.nodes
-    }
-    #[inline(always)]
-    fn store(&mut self, index: usize, stats: Statistics) {
-        self.out.push((index as u32, stats));
-    }
-}
-
 /// `stats` into `node`.
 #[inline(always)]
 fn store(node: &mut Node, stats: Statistics) {
@@ -893,87 +996,6 @@ fn store(node: &mut Node, stats: Statistics) {
     node.channel_covariances = stats.covariances;
     node.harmonic_norms = stats.harmonic_norms;
     node.moment_error = stats.moment_error;
-}
-
-/// The moments of node `index` about its centroid into `path[0]`, after
-/// its descendants' (into `path[1]`, one level down); stores the node's
-/// moment statistics. `$recurse` is the function itself (one per compiled
-/// copy).
-macro_rules! fill_moments_body {
-    ($recurse:ident, $access:ident, $lights:ident, $index:ident, $path:ident, $scratch:ident) => {{
-        let (out, below) = $path
-            .split_first_mut()
-            .expect("one buffer per level of the tree");
-        if let Some(done) = $access.done($index) {
-            *out = *done;
-            return;
-        }
-        // The fields read, not the whole node.
-        let node = &$access.nodes()[$index];
-        let c = node.centroid.as_dvec3();
-        let (intensity, radius, count) = (node.intensity, node.radius, node.light_count);
-        let (leaf, members, children) = (node.is_leaf(), node.lights(), node.children());
-        if leaf {
-            out.set_to_lights(&$lights[members], c, $scratch);
-        } else {
-            out.clear();
-            for k in children {
-                $recurse($access, $lights, k, below, $scratch);
-                let t = $access.nodes()[k].centroid.as_dvec3() - c;
-                below[0].shift_into(t, out);
-            }
-        }
-        let stats = out.statistics(intensity, radius, count as usize);
-        $access.store($index, stats);
-    }};
-}
-
-/// See [`fill_moments_body`]: on `x86_64` processors with AVX2 and FMA, a
-/// copy compiled for them (the same bits, see [`dispatch`](crate::dispatch)).
-// Calling the AVX2 copy is one of the crate's unsafe blocks (see
-// `dispatch`).
-#[allow(unsafe_code)]
-fn fill_moments<A: Access>(
-    access: &mut A,
-    lights: &[PointLight],
-    index: usize,
-    path: &mut [Moments],
-    scratch: &mut LeafScratch,
-) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if crate::dispatch::avx2_fma() {
-            // SAFETY: the processor has AVX2 and FMA (`dispatch::avx2_fma`
-            // checked).
-            unsafe { fill_moments_avx2(access, lights, index, path, scratch) };
-            return;
-        }
-    }
-    fill_moments_baseline(access, lights, index, path, scratch);
-}
-
-/// [`fill_moments`] in the baseline build.
-fn fill_moments_baseline<A: Access>(
-    access: &mut A,
-    lights: &[PointLight],
-    index: usize,
-    path: &mut [Moments],
-    scratch: &mut LeafScratch,
-) {
-    fill_moments_body!(fill_moments_baseline, access, lights, index, path, scratch)
-}
-
-/// [`fill_moments`] compiled for AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn fill_moments_avx2<A: Access>(
-    access: &mut A,
-    lights: &[PointLight],
-    index: usize,
-    path: &mut [Moments],
-    scratch: &mut LeafScratch,
-) {
-    fill_moments_body!(fill_moments_avx2, access, lights, index, path, scratch)
 }
 
 #[cfg(test)]
@@ -1023,6 +1045,58 @@ mod tests {
                     (sum - expected).abs() <= 2048.0 * f64::EPSILON * scale,
                     "degree {l}: {sum} against {expected}"
                 );
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod checks {
+    use glam::Vec3;
+
+    use super::{bound_part, check_range};
+    use crate::PointLight;
+
+    /// The branch-free check accepts exactly the lights that the checks
+    /// one by one accept, on the edges of each condition.
+    #[test]
+    fn the_fast_check_accepts_what_the_checks_accept() {
+        let max = PointLight::MAX_COORDINATE;
+        let coordinates = [
+            0.0,
+            -0.0,
+            1.5,
+            -max,
+            max,
+            f32::from_bits(max.to_bits() + 1),
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        let channels = [
+            0.0,
+            -0.0,
+            2.0,
+            f32::MAX,
+            -f32::MIN_POSITIVE,
+            -1.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        for (a, &c) in coordinates.iter().enumerate() {
+            for (b, &i) in channels.iter().enumerate() {
+                for axis in 0..3 {
+                    let mut light = PointLight::new(Vec3::ONE, Vec3::ONE);
+                    light.position[axis] = c;
+                    light.intensity[(axis + a + b) % 3] = i;
+                    let lights = [PointLight::default(), light];
+                    assert_eq!(
+                        bound_part(&lights).1,
+                        check_range(&lights).is_ok(),
+                        "coordinate {c}, channel {i}"
+                    );
+                }
             }
         }
     }

@@ -50,8 +50,8 @@ impl Grid {
         }
         // largest < 2^(exponent + 1); cells of 2^(exponent + 1 - GRID_BITS).
         let exponent = ((largest.to_bits() >> 52) & 0x7ff) as i32 - 1023;
-        let scale = (2.0f64).powi(GRID_BITS - 1 - exponent);
-        (scale.is_finite() && scale > 0.0).then_some(Self { scale })
+        let scale = power_of_two(GRID_BITS - 1 - exponent)?;
+        Some(Self { scale })
     }
 
     /// The integer coordinates of an `f32`-valued point, `None` when a
@@ -63,13 +63,31 @@ impl Grid {
             // A power-of-two scaling is exact away from overflow and
             // underflow, both excluded by the range of `f32` values.
             let v = p[k] * self.scale;
-            if v != v.trunc() || v.abs() >= (2.0f64).powi(GRID_BITS) {
+            // Below 2^GRID_BITS (which NaN is not), `v as i64` drops the
+            // fraction and is exact back in `f64`: equal to `v` exactly
+            // when `v` is a whole number.
+            if !(v.abs() < GRID_LIMIT) {
                 return None;
             }
-            *o = v as i64;
+            let i = v as i64;
+            if i as f64 != v {
+                return None;
+            }
+            *o = i;
         }
         Some(out)
     }
+}
+
+/// `2^GRID_BITS`, the bound of a grid's integer coordinates.
+const GRID_LIMIT: f64 = (1u64 << GRID_BITS) as f64;
+
+/// `2^k` built from its bits, `None` outside `f64`'s normal range (for an
+/// `f32` coordinate's grid `k` lies in `[-88, 188]`).
+fn power_of_two(k: i32) -> Option<f64> {
+    (-1022..=1023)
+        .contains(&k)
+        .then(|| f64::from_bits(((k + 1023) as u64) << 52))
 }
 
 /// Integer coordinates of `f32`-valued points on the [`Grid`] of their
@@ -325,6 +343,14 @@ mod tests {
         // Lamps at one height: the boxes are flat, which settles their plane.
         let t = tree((0..2000).map(|k| Vec3::new((k % 50) as f32, (k / 50) as f32, 6.0)));
         assert!(t.planes.is_empty());
+    }
+
+    #[test]
+    fn powers_of_two_are_exact() {
+        for k in -1100..1100 {
+            let normal = (-1022..=1023).contains(&k);
+            assert_eq!(power_of_two(k), normal.then(|| 2.0f64.powi(k)), "2^{k}");
+        }
     }
 
     #[test]

@@ -26,7 +26,7 @@ impl LightTree {
 
     /// [`refit`](Self::refit) spread over rayon's thread pool (with the
     /// `rayon` feature): the same nodes, bit for bit, and the same errors.
-    /// Trees of fewer than 32,768 lights, or a pool of one thread, refit on
+    /// Trees of fewer than 8,192 lights, or a pool of one thread, refit on
     /// the calling thread.
     ///
     /// # Errors
