@@ -72,9 +72,11 @@
 //!   the degree-2 term within `392 u y` (the weights' errors, the six
 //!   products' sum and `1 / (2 D^2)`), and the sum of the three within
 //!   `11 u + 69 u x + 416 u y`. [`ESTIMATE`] takes `16 + 128 x + 1024 y`
-//!   units of `u`. The `f32` storage of the moments adds `2 u (x + 33 tr(S_k)
-//!   / D^2)` as in the `f64` bound, and the build's `f64` sums of them `2
-//!   delta (sigma + 18 sigma^2)`, which the caller adds in `f64`.
+//!   units of `u`, with `x` bounded by `1.75 sigma` (every member lies
+//!   within `R` of the centroid, so `|o_k| <= R` up to the build's
+//!   rounding). The `f32` storage of the moments adds `2 u (x + 33
+//!   tr(S_k) / D^2)` as in the `f64` bound, and the build's `f64` sums of
+//!   them `2 delta (sigma + 18 sigma^2)`, added in `f64`.
 //! * *The series' remainder* is a sum of minima of products of non-negative
 //!   factors (about 20 roundings), each factor either computed from the
 //!   widened `sigma`, `|c0| +` [`C0`], `sin_c +` [`SIN`] and the box's
@@ -484,13 +486,18 @@ pub(crate) fn lane_bounds<const N: usize>(
     // Per lane, the largest `lo - hi` over the channels: positive where
     // the intervals are disjoint in some channel.
     let mut disjoint = w(f64::from(f32::MIN));
+    // `x = |o_k|_1 / D` enters only the slacks: every member lies within
+    // `R` of the centroid, so the stored offsets have `|o_k| <= R (1 +
+    // delta) (1 + u)` and `x <= sqrt(3) (1 + delta + u) sigma`, at most
+    // `1.75 sigma` for any build rounding `delta` below 1% (it is about
+    // `1e-12`).
+    let x = w(1.75) * sigma;
     for k in 0..3 {
         let e = estimate(block, &g, &weights, k);
-        let o = |a: usize| row::<f32, N>(block, OFFSETS + 3 * k + a);
-        let x = (o(0).abs() + o(1).abs() + o(2).abs()) * g.inv_d;
         let s = |e: usize| row::<f32, N>(block, COVARIANCES + 6 * k + e);
+        // The stored diagonal entries are at least 0 (rounded upward).
         let trace = s(0) + s(1) + s(2);
-        let entries = s(0).abs() + s(1).abs() + s(2).abs() + s(3).abs() + s(4).abs() + s(5).abs();
+        let entries = trace + s(3).abs() + s(4).abs() + s(5).abs();
         let mu2 = trace * inv_d2;
         let y = entries * inv_d2;
         let rest = remainder(block, &g, &terms, mu2, k);
@@ -555,6 +562,8 @@ mod tests {
     struct Worst {
         /// The exact `R / D` over the computed `sigma` (at most 1).
         sigma: f64,
+        /// `|o_k|_1 / D` over its bound `1.75 sigma` (at most 1).
+        offsets: f64,
         c0: f64,
         sin_c: f64,
         height: f64,
@@ -648,6 +657,8 @@ mod tests {
                 .sum::<f64>()
                 * inv_d
                 * inv_d;
+            // The kernel's bound on x.
+            up(&mut worst.offsets, x / (1.75 * l32(g32.sigma)));
             let allowance = U * (ESTIMATE[0] + ESTIMATE[1] * x + ESTIMATE[2] * y);
             up(&mut worst.estimate, ratio((e32 - e64).abs(), allowance));
             // The remainder from the widened f32 inputs, widened, against
@@ -751,6 +762,7 @@ mod tests {
         assert!(worst.lanes > 2000, "{worst:?}");
         for (what, r) in [
             ("sigma", worst.sigma),
+            ("offsets", worst.offsets),
             ("c0", worst.c0),
             ("sin_c", worst.sin_c),
             ("height", worst.height),

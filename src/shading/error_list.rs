@@ -5,8 +5,6 @@ use std::cmp::Ordering;
 
 use glam::DVec3;
 
-use crate::numeric::CompensatedSum;
-
 /// Why a node is waiting in the error list, in the order classes are
 /// refined: a node that may not stay in the cut comes before any error.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -148,6 +146,8 @@ pub(crate) struct ErrorList {
     /// Whether the sums are those of the last [`resum`](Self::resum), with
     /// no push or pop since.
     fresh: bool,
+    /// The last [`resum`](Self::resum)'s bound on its own rounding.
+    rounding: DVec3,
     over_contribution: u32,
     unbounded: u32,
 }
@@ -171,6 +171,7 @@ impl Default for ErrorList {
             estimate: DVec3::ZERO,
             error: DVec3::ZERO,
             fresh: true,
+            rounding: DVec3::ZERO,
             over_contribution: 0,
             unbounded: 0,
         }
@@ -208,6 +209,7 @@ impl ErrorList {
         self.estimate = DVec3::ZERO;
         self.error = DVec3::ZERO;
         self.fresh = true;
+        self.rounding = DVec3::ZERO;
         self.over_contribution = 0;
         self.unbounded = 0;
     }
@@ -382,23 +384,38 @@ impl ErrorList {
         (self.estimate, self.error)
     }
 
-    /// Recomputes the sums from scratch with compensated summation, replaces
-    /// the running ones with them and returns them (at once if nothing was
-    /// pushed or popped since the last time).
+    /// Recomputes the sums from scratch, replaces the running ones with them
+    /// and returns them, the error sum raised by the rounding of both sums
+    /// (at once if nothing was pushed or popped since the last time).
+    ///
+    /// The waiting entries are summed in four interleaved plain sums, added
+    /// pairwise: independent additions rather than one compensated chain,
+    /// which cost about a twelfth of a shading point at 10^4 lights. A sum
+    /// of `n` terms in any order is within `(n - 1) eps` of the exact sum
+    /// of their magnitudes (Higham, *Accuracy and Stability of Numerical
+    /// Algorithms*, 2002, section 4.2; `eps = f64::EPSILON / 2`), so
+    /// `(n + 1) f64::EPSILON` of the estimates' and errors' magnitudes,
+    /// added to the error sum, covers both sums' rounding.
     pub(crate) fn resum(&mut self) -> (DVec3, DVec3) {
-        if self.fresh {
-            return (self.estimate, self.error);
+        if !self.fresh {
+            let mut estimate = [DVec3::ZERO; 4];
+            let mut magnitude = [DVec3::ZERO; 4];
+            let mut error = [DVec3::ZERO; 4];
+            let mut n = 0;
+            for (e, _) in self.waiting() {
+                let (e, r) = e.counted();
+                estimate[n % 4] += e;
+                magnitude[n % 4] += e.abs();
+                error[n % 4] += r;
+                n += 1;
+            }
+            let total = |v: [DVec3; 4]| (v[0] + v[1]) + (v[2] + v[3]);
+            self.estimate = total(estimate);
+            self.error = total(error);
+            self.rounding = (total(magnitude) + self.error) * ((n as f64 + 1.0) * f64::EPSILON);
+            self.fresh = true;
         }
-        let mut estimate = CompensatedSum::default();
-        let mut error = CompensatedSum::default();
-        for (e, _) in self.waiting() {
-            let (e, r) = e.counted();
-            estimate.add(e);
-            error.add(r);
-        }
-        (self.estimate, self.error) = (estimate.value(), error.value());
-        self.fresh = true;
-        (self.estimate, self.error)
+        (self.estimate, self.error + self.rounding)
     }
 
     /// Number of waiting entries.

@@ -865,11 +865,12 @@ fn met((estimate, error): (DVec3, DVec3), largest: f64, threshold: &Threshold) -
     threshold.met(estimate, reported_bound(error), largest)
 }
 
-/// The certified bound reported for a summed error: the compensated sums
-/// are within a few ulps of the sums of magnitudes; what that leaves of the
-/// estimate's rounding is within the rounding allowance of the exact value
-/// (terms are non-negative), and the error sum's own rounding is folded in
-/// here.
+/// The certified bound reported for a summed error: the error list's sums
+/// carry their own rounding bound ([`ErrorList::resum`]) and the settled
+/// compensated sum is within a few ulps of its magnitude, which the rounding
+/// allowance of the exact value covers (its terms are non-negative); the
+/// rounding of the last additions (settled plus waiting, estimate plus
+/// error) is folded in here.
 #[inline]
 pub(crate) fn reported_bound(error: DVec3) -> DVec3 {
     error * (1.0 + SUM_SLACK)
