@@ -108,7 +108,12 @@
 //! small groups of visible lights with [`Shader::sum_lights_coarse`]
 //! ([`Lambert`] in `f32` lanes) and adds each group's certified rounding
 //! bound to its own, keeping a group's coarse sum only where that bound is
-//! at most a thirty-second of the target share of the sum.
+//! at most a thirty-second of the target share of the sum; and it bounds
+//! the children of the nodes it refines with
+//! [`Shader::bound_children_coarse`] ([`Lambert`]'s series bound in `f32`
+//! lanes, every step widened by its rounding as derived in its docs, so
+//! each bound is still certified, at most about `2^-13` of the node's `I
+//! kd / (D - R)^2` wider than the `f64` one).
 //!
 //! Where a term jumps, no allowance is needed, and none is widened: a
 //! single light's term is exactly 0 when the model's is (in the tangent

@@ -221,6 +221,22 @@ impl BoundKind {
 /// term, and by the same `2 delta (sigma + 18 sigma^2)` as the series for
 /// the build's moment sums; the quadratic forms of `S_k` by
 /// `f32::EPSILON * tr(S_k)`.
+///
+/// **Single precision.** [`Shader::bound_children_coarse`] evaluates the
+/// same series, paper and box intervals for a node's children side by side
+/// in `f32` lanes, every quantity dimensionless (in units of `D` and of
+/// `I_k kd_k / D^2`) so that `f32`'s range holds at any scale, and the
+/// final scaling in `f64`. Each step is widened by its own `f32` rounding,
+/// derived operation by operation (`c0` within `8.6 u`, the degree-0 to 2
+/// estimate within `u (11 + 69 x + 416 y)` with `u = 2^-24`, `x = |o_k|_1 /
+/// D`, `y` the stored `S_k`'s magnitudes over `D^2`, the offset's rounding
+/// as a point moved by `u D`, and so on; the allowances used are about
+/// twice these), and a test checks every step against the same formula in
+/// `f64`. Children with squared distances outside `[2^-120, 2^120]`, or
+/// whose ball comes within `2^-6 D` of the point (where the offset's
+/// rounding, magnified by `(D / (D - R))^3`, would dominate), are bounded
+/// in `f64` as above. The harmonic norms are read from half-precision
+/// copies rounded upward (at most `2^-10` larger).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lambert {
     kd: DVec3,

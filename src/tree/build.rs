@@ -253,7 +253,7 @@ impl TreeBuilder {
         drop(shapes);
         fill_statistics(&mut tree, pool);
         super::plane::record_planes(&mut tree, cheap);
-        tree.fill_groups();
+        tree.fill_groups(pool);
         Ok(tree)
     }
 }
@@ -1179,6 +1179,7 @@ mod parallel {
         assert_eq!(a.depth, b.depth);
         assert_eq!(a.planes, b.planes);
         assert_eq!(a.node_planes, b.node_planes);
+        assert_eq!(a.groups, b.groups);
     }
 
     #[test]

@@ -17,6 +17,7 @@
 //! node's multipoles.
 
 use super::layout::{LightTree, Node};
+use super::pool::Pool;
 
 /// `f32` rows of a block, one per field.
 pub(crate) const ROWS: usize = 37;
@@ -59,6 +60,14 @@ pub(crate) struct NodeGroups {
     /// `eights` with [`EIGHT`] set; [`NO_BLOCK`] for a leaf.
     at: Vec<u32>,
 }
+
+/// Blocks are filled on the build's pool from this many on: a block takes
+/// about a tenth of a microsecond (its lanes' statistics gathered and
+/// rounded), so a few thousand of them outweigh waking the pool's threads
+/// (up to a millisecond or more on a busy machine); the street city has
+/// 2,000 blocks at 10^5 lights and 22,000 at 10^6. Lower in the tests, so
+/// that their parallel builds take this path.
+const PARALLEL_BLOCKS: usize = if cfg!(test) { 64 } else { 8192 };
 
 /// No block: a leaf's entry in the table.
 const NO_BLOCK: u32 = u32::MAX;
@@ -110,29 +119,39 @@ impl<const N: usize> Block<N> {
 impl NodeGroups {
     /// The blocks of `nodes` (a built tree's, root first).
     pub(crate) fn new(nodes: &[Node]) -> Self {
-        let inner = nodes.iter().filter(|n| !n.is_leaf());
-        let eights = inner.filter(|n| n.children().len() > 4).count();
-        let fours = nodes.iter().filter(|n| !n.is_leaf()).count() - eights;
-        let mut groups = Self {
-            fours: Vec::with_capacity(fours),
-            eights: Vec::with_capacity(eights),
-            at: vec![NO_BLOCK; nodes.len()],
-        };
+        Self::new_on(nodes, Pool::ONE)
+    }
+
+    /// [`NodeGroups::new`], the blocks filled on `pool` (the same blocks).
+    pub(crate) fn new_on(nodes: &[Node], pool: Pool) -> Self {
+        let mut at = vec![NO_BLOCK; nodes.len()];
+        let (mut fours, mut eights) = (Vec::new(), Vec::new());
         for (index, parent) in nodes.iter().enumerate() {
             if parent.is_leaf() {
                 continue;
             }
-            let children = &nodes[parent.children()];
             // Node counts fit in `u32`, and so do block counts (fewer).
-            groups.at[index] = if children.len() <= 4 {
-                groups.fours.push(Block::of(children));
-                (groups.fours.len() - 1) as u32
+            at[index] = if parent.child_count <= 4 {
+                fours.push(index);
+                (fours.len() - 1) as u32
             } else {
-                groups.eights.push(Block::of(children));
-                (groups.eights.len() - 1) as u32 | EIGHT
+                eights.push(index);
+                (eights.len() - 1) as u32 | EIGHT
             };
         }
-        groups
+        let block = |&index: &usize| &nodes[nodes[index].children()];
+        let on = |blocks: usize| {
+            if blocks >= PARALLEL_BLOCKS {
+                pool
+            } else {
+                Pool::ONE
+            }
+        };
+        Self {
+            fours: on(fours.len()).map(&fours, |i| Block::of(block(i))),
+            eights: on(eights.len()).map(&eights, |i| Block::of(block(i))),
+            at,
+        }
     }
 
     /// The children of node `index`, or `None` for a leaf.
@@ -265,9 +284,10 @@ fn relative_extent(min: f32, max: f32, c: f32) -> (f32, f32) {
 }
 
 impl LightTree {
-    /// Recomputes the node groups from the nodes (after a build or refit).
-    pub(crate) fn fill_groups(&mut self) {
-        self.groups = NodeGroups::new(&self.nodes);
+    /// Recomputes the node groups from the nodes (after a build or refit),
+    /// on `pool`.
+    pub(crate) fn fill_groups(&mut self, pool: Pool) {
+        self.groups = NodeGroups::new_on(&self.nodes, pool);
     }
 }
 

@@ -49,7 +49,7 @@ impl LightTree {
             .fill(&mut self.lights, |i| lights[order[i] as usize]);
         fill_statistics(self, pool);
         super::plane::record_planes(self, pool.cheap(lights.len()));
-        self.fill_groups();
+        self.fill_groups(pool);
         Ok(())
     }
 }
