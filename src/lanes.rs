@@ -1,77 +1,28 @@
-//! `N` lanes of `f64`, operated on lane by lane: the node bounds are written
-//! once over this type and run with one lane (a single node) or eight (the
-//! children of a node, side by side). Every operation is the scalar one
-//! applied to each lane, so a lane's result is the same bits whatever `N`
-//! and whichever compiled copy runs; the loops are fixed-length and inlined,
-//! which the compiler turns into vector instructions (two 4-wide AVX2
-//! operations for eight lanes).
+//! `N` lanes of `f64` or `f32`, operated on lane by lane: the node bounds
+//! are written once over this type and run with one lane (a single node)
+//! or several (the children of a node, side by side). Every operation is
+//! the scalar one applied to each lane, so a lane's result is the same
+//! bits whatever `N` and whichever compiled copy runs; the loops are
+//! fixed-length and inlined, which the compiler turns into vector
+//! instructions (two 4-wide AVX2 operations for eight `f64` lanes, one
+//! for eight `f32` lanes).
 
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub};
 
-/// `N` values of `f64`, one per lane.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Lanes<const N: usize>(pub(crate) [f64; N]);
+/// `N` values of `f64`, one per lane: the `f64` node bounds' lanes.
+pub(crate) type Lanes<const N: usize> = Wide<f64, N>;
 
 impl<const N: usize> Lanes<N> {
-    /// The same value in every lane.
-    #[inline(always)]
-    pub(crate) const fn splat(x: f64) -> Self {
-        Self([x; N])
-    }
-
     /// Lane `i` holds `f(i)`.
     #[inline(always)]
     pub(crate) fn from_fn(f: impl FnMut(usize) -> f64) -> Self {
-        Self(array(0.0, f))
-    }
-
-    #[inline(always)]
-    fn map(self, f: impl Fn(f64) -> f64) -> Self {
-        Self(array(0.0, |i| f(self.0[i])))
-    }
-
-    #[inline(always)]
-    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
-        Self(array(0.0, |i| f(self.0[i], other.0[i])))
-    }
-
-    /// Per lane `if a < b { a } else { b }`: the smaller, and `b` if either
-    /// is NaN (like `f64::min` when `b` is not NaN).
-    #[inline(always)]
-    pub(crate) fn min(self, b: Self) -> Self {
-        self.zip(b, |a, b| if a < b { a } else { b })
-    }
-
-    /// Per lane `if a > b { a } else { b }`: the larger, and `b` if either
-    /// is NaN (like `f64::max` when `b` is not NaN).
-    #[inline(always)]
-    pub(crate) fn max(self, b: Self) -> Self {
-        self.zip(b, |a, b| if a > b { a } else { b })
-    }
-
-    #[inline(always)]
-    pub(crate) fn abs(self) -> Self {
-        self.map(f64::abs)
-    }
-
-    #[inline(always)]
-    pub(crate) fn sqrt(self) -> Self {
-        self.map(f64::sqrt)
+        Wide(array(0.0, f))
     }
 
     /// `1 / x` per lane (one correctly rounded division).
     #[inline(always)]
     pub(crate) fn recip(self) -> Self {
         1.0 / self
-    }
-
-    /// Per lane `if a >= b { x } else { y }`.
-    #[inline(always)]
-    pub(crate) fn select_ge(a: Self, b: Self, x: Self, y: Self) -> Self {
-        Self(array(
-            0.0,
-            |i| if a.0[i] >= b.0[i] { x.0[i] } else { y.0[i] },
-        ))
     }
 }
 
@@ -87,15 +38,10 @@ pub(crate) fn array<T: Copy, const N: usize>(fill: T, mut f: impl FnMut(usize) -
     out
 }
 
-macro_rules! binary {
+/// The arithmetic of `f64` lanes with one `f64` for every lane, on
+/// either side.
+macro_rules! scalar_binary {
     ($trait:ident, $method:ident, $op:tt) => {
-        impl<const N: usize> $trait for Lanes<N> {
-            type Output = Self;
-            #[inline(always)]
-            fn $method(self, b: Self) -> Self {
-                self.zip(b, |a, b| a $op b)
-            }
-        }
         impl<const N: usize> $trait<f64> for Lanes<N> {
             type Output = Self;
             #[inline(always)]
@@ -113,36 +59,14 @@ macro_rules! binary {
     };
 }
 
-binary!(Add, add, +);
-binary!(Sub, sub, -);
-binary!(Mul, mul, *);
-binary!(Div, div, /);
-
-impl<const N: usize> Neg for Lanes<N> {
-    type Output = Self;
-    #[inline(always)]
-    fn neg(self) -> Self {
-        self.map(|a| -a)
-    }
-}
-
-impl<const N: usize> AddAssign for Lanes<N> {
-    #[inline(always)]
-    fn add_assign(&mut self, b: Self) {
-        *self = *self + b;
-    }
-}
+scalar_binary!(Add, add, +);
+scalar_binary!(Sub, sub, -);
+scalar_binary!(Mul, mul, *);
+scalar_binary!(Div, div, /);
 
 impl<const N: usize> MulAssign<f64> for Lanes<N> {
     #[inline(always)]
     fn mul_assign(&mut self, b: f64) {
-        *self = *self * b;
-    }
-}
-
-impl<const N: usize> MulAssign for Lanes<N> {
-    #[inline(always)]
-    fn mul_assign(&mut self, b: Self) {
         *self = *self * b;
     }
 }
@@ -329,7 +253,7 @@ pub(crate) struct Wide<T, const N: usize>(pub(crate) [T; N]);
 impl<T: Real, const N: usize> Wide<T, N> {
     /// The same value in every lane.
     #[inline(always)]
-    pub(crate) fn splat(x: T) -> Self {
+    pub(crate) const fn splat(x: T) -> Self {
         Self([x; N])
     }
 
@@ -361,13 +285,15 @@ impl<T: Real, const N: usize> Wide<T, N> {
         Self(array(T::default(), |i| f(self.0[i], b.0[i])))
     }
 
-    /// Per lane `if a < b { a } else { b }` (`b` if either is NaN).
+    /// Per lane `if a < b { a } else { b }`: the smaller, and `b` if either
+    /// is NaN (like `f64::min` when `b` is not NaN).
     #[inline(always)]
     pub(crate) fn min(self, b: Self) -> Self {
         self.zip(b, |a, b| if a < b { a } else { b })
     }
 
-    /// Per lane `if a > b { a } else { b }` (`b` if either is NaN).
+    /// Per lane `if a > b { a } else { b }`: the larger, and `b` if either
+    /// is NaN (like `f64::max` when `b` is not NaN).
     #[inline(always)]
     pub(crate) fn max(self, b: Self) -> Self {
         self.zip(b, |a, b| if a > b { a } else { b })
@@ -433,7 +359,7 @@ impl<T: Real, const N: usize> MulAssign for Wide<T, N> {
 
 #[cfg(test)]
 mod tests {
-    use super::Lanes;
+    use super::Wide;
 
     /// `min` and `max` agree with `f64::min` and `f64::max` whenever the
     /// second operand is a number, NaN first operands included.
@@ -442,7 +368,7 @@ mod tests {
         let values = [f64::NAN, -1.0, 0.0, 0.5, f64::INFINITY, f64::NEG_INFINITY];
         for a in values {
             for b in values.into_iter().filter(|b| !b.is_nan()) {
-                let (x, y) = (Lanes::<1>([a]), Lanes::<1>([b]));
+                let (x, y) = (Wide::<f64, 1>([a]), Wide::<f64, 1>([b]));
                 assert_eq!(x.min(y).0[0], a.min(b), "min({a}, {b})");
                 assert_eq!(x.max(y).0[0], a.max(b), "max({a}, {b})");
             }

@@ -416,11 +416,11 @@ impl Shader for Lambert {
         let children = &tree.nodes()[node.children()];
         match group {
             Group::Four(block) => {
-                let lanes = group_bounds_four(block, &at, &self.scales(children));
+                let lanes = group_bounds(block, &at, &self.scales(children));
                 self.fill_children(surface, children, wanted, &lanes, out);
             }
             Group::Eight(block) => {
-                let lanes = group_bounds_eight(block, &at, &self.scales(children));
+                let lanes = group_bounds(block, &at, &self.scales(children));
                 self.fill_children(surface, children, wanted, &lanes, out);
             }
         }
@@ -829,38 +829,19 @@ impl Lambert {
     }
 }
 
-/// A block of four lanes' bounds ([`group::lane_bounds`]): on `x86_64`
-/// processors with AVX2, in a copy compiled for AVX2 (the same bits, see
-/// [`dispatch`](crate::dispatch)). Out of line, compiled once.
+/// A block's bounds ([`group::lane_bounds`]): on `x86_64` processors with
+/// AVX2, in a copy compiled for AVX2 (the same bits, see
+/// [`dispatch`](crate::dispatch)). Out of line, compiled once per block
+/// width.
 // Calling the AVX2 copy is one of the crate's unsafe blocks (see
 // `dispatch`).
 #[allow(unsafe_code)]
 #[inline(never)]
-fn group_bounds_four(
-    block: &Block<4>,
+fn group_bounds<const N: usize>(
+    block: &Block<N>,
     at: &group::PointView<f32>,
-    scales: &group::LaneScales<4>,
-) -> group::LaneBounds<4> {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if crate::dispatch::avx2() {
-            // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-            return unsafe { group_bounds_avx2(block, at, scales) };
-        }
-    }
-    group::lane_bounds(block, at, scales)
-}
-
-/// [`group_bounds_four`] for blocks of eight lanes.
-// Calling the AVX2 copy is one of the crate's unsafe blocks (see
-// `dispatch`).
-#[allow(unsafe_code)]
-#[inline(never)]
-fn group_bounds_eight(
-    block: &Block<8>,
-    at: &group::PointView<f32>,
-    scales: &group::LaneScales<8>,
-) -> group::LaneBounds<8> {
+    scales: &group::LaneScales<N>,
+) -> group::LaneBounds<N> {
     #[cfg(target_arch = "x86_64")]
     {
         if crate::dispatch::avx2() {

@@ -212,7 +212,7 @@ pub(crate) fn shared_widths<const N: usize>(
 #[cfg(test)]
 mod tests {
     use super::tail_sums;
-    use crate::lanes::Lanes;
+    use crate::lanes::Wide;
 
     /// The closed forms of the tail sums against the series summed term by
     /// term.
@@ -220,7 +220,7 @@ mod tests {
     fn tail_sums_match_their_series() {
         for i in 0..=99 {
             let sigma = f64::from(i) / 100.0;
-            let (g1, g2) = tail_sums(Lanes::<1>([sigma]), Lanes([1.0 / (1.0 - sigma)]));
+            let (g1, g2) = tail_sums(Wide::<f64, 1>([sigma]), Wide([1.0 / (1.0 - sigma)]));
             let (g1, g2) = (g1.0[0], g2.0[0]);
             let (mut s1, mut s2, mut power) = (0.0, 0.0, 1.0);
             for j in 0..20_000 {
