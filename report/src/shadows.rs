@@ -156,8 +156,13 @@ pub const FRACTION_POINTS: [Vec3; 4] = [
 ///   only. The list holds every box within [`MARGIN`] of the shaft, farther
 ///   than rounding moves a segment's slab test, so every box whose slab test
 ///   the segment passes is on the list, and the ray answers as the BVH's
-///   any-hit traversal does (which prunes nodes by the same slab test; a
-///   node holds its boxes, and rounding is monotone).
+///   any-hit traversal does: that traversal tests the same boxes with the
+///   same slab test, and prunes a BVH node only when the segment misses the
+///   node's bounds, which hold its boxes (`obvhs` clamps an inverse
+///   direction component beyond `1 / f32::EPSILON`, so a segment within
+///   about `1e-7` of parallel to a face, and as close to it, could in
+///   principle be pruned where the box test hits; the member's tests
+///   compare every ray of the cut with the traversal's).
 ///
 /// The listed boxes form a tree (each under the smallest listed box that
 /// held it when it was listed), so the smallest list holding a box is found
