@@ -182,7 +182,7 @@ pub const FRACTION_POINTS: [Vec3; 4] = [
 /// it right after a `Partial` answer, when that node's interval is the
 /// largest error in the cut: unless a budget stops the cut first, the node
 /// is refined next and its estimate is rarely used. Five rays per partial
-/// answer then only add cost (in the report's city at a certified 1%, 1.4
+/// answer then only add cost (in the report's city at a certified 1%, 1.2
 /// times the time for the same errors), so the host casts them only when
 /// asked to, for renderers that shade with a budget.
 pub struct Shadows<'o> {
