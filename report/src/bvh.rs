@@ -193,8 +193,18 @@ impl Occluders {
     #[inline]
     pub fn any_in(
         &self,
-        mut enter: impl FnMut(&BvhAabb) -> bool,
+        enter: impl FnMut(&BvhAabb) -> bool,
         mut visit: impl FnMut(&BvhAabb) -> bool,
+    ) -> bool {
+        self.any_slot_in(enter, |_, b| visit(b))
+    }
+
+    /// [`any_in`](Self::any_in), `visit` given each box's slot too.
+    #[inline]
+    pub fn any_slot_in(
+        &self,
+        mut enter: impl FnMut(&BvhAabb) -> bool,
+        mut visit: impl FnMut(usize, &BvhAabb) -> bool,
     ) -> bool {
         let nodes = &self.bvh.nodes;
         let Some(root) = nodes.first() else {
@@ -203,11 +213,12 @@ impl Occluders {
         if !enter(root.aabb()) {
             return false;
         }
-        let boxes = |node: &Bvh2Node| {
-            &self.boxes[node.first_index as usize..(node.first_index + node.prim_count) as usize]
+        let mut leaf = |node: &Bvh2Node| {
+            let slots = node.first_index as usize..(node.first_index + node.prim_count) as usize;
+            slots.into_iter().any(|slot| visit(slot, &self.boxes[slot]))
         };
         if root.is_leaf() {
-            return boxes(root).iter().any(visit);
+            return leaf(root);
         }
         let mut found = false;
         // A stack as deep as the tree (obvhs sizes its own for the deepest
@@ -224,7 +235,7 @@ impl Occluders {
                     }
                     if !node.is_leaf() {
                         stack.push(node.first_index);
-                    } else if boxes(node).iter().any(&mut visit) {
+                    } else if leaf(node) {
                         found = true;
                         break 'pairs;
                     }

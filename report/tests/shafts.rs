@@ -2,7 +2,8 @@
 //! box occluders, a box it calls visible is reached by a shadow ray at every
 //! one of many points, and a box it calls occluded by none; asked through
 //! the crate's cut, the same holds for every node's lights, and the
-//! certified bound holds against the exact shadowed sum. The cut keeps
+//! certified bound holds against the exact shadowed sum, and every shadow
+//! ray through a candidate list answers as the BVH does. The cut keeps
 //! classifying in the city and gives up under the canopy.
 
 use glam::Vec3;
@@ -11,7 +12,7 @@ use manylights::{
 };
 use manylights_report::bvh::{Occluders, corners};
 use manylights_report::scenes::{SceneRng, rng};
-use manylights_report::shadows::Shadows;
+use manylights_report::shadows::{SHADOW_OFFSET, Shadows};
 use rand::RngExt;
 
 /// Random scenes per test.
@@ -114,10 +115,14 @@ fn shaft_answers_agree_with_rays_to_the_box() {
 }
 
 /// A host that checks every classification against shadow rays to the
-/// node's box and to each of its lights.
+/// node's box and to each of its lights, and every shadow ray (through a
+/// candidate list or not) against the BVH's any-hit traversal.
 struct Checked<'a> {
     host: Shadows<'a>,
     tree: &'a LightTree,
+    occluders: &'a Occluders,
+    /// The host's offset of the shading point.
+    lift: Vec3,
     rng: SceneRng,
     answers: [usize; 3],
 }
@@ -142,7 +147,13 @@ impl Visibility for Checked<'_> {
     }
 
     fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
-        self.host.visible(point, light)
+        let seen = self.host.visible(point, light);
+        assert_eq!(
+            seen,
+            !self.occluders.blocked(point + self.lift, light),
+            "the shadow ray from {point} to {light} differs from the BVH's"
+        );
+        seen
     }
 
     fn visible_fraction(&mut self, point: Vec3, node: &NodeRegion) -> Option<f32> {
@@ -152,7 +163,7 @@ impl Visibility for Checked<'_> {
 
 #[test]
 fn node_answers_agree_with_rays_and_keep_the_bound() {
-    let mut answers = [0usize; 3];
+    let (mut answers, mut listed_rays) = ([0usize; 3], 0);
     for seed in 0..SCENES / 4 {
         let mut rng = rng(1_000 + seed);
         let boxes = random_occluders(&mut rng);
@@ -179,6 +190,8 @@ fn node_answers_agree_with_rays_and_keep_the_bound() {
                 let mut checked = Checked {
                     host: Shadows::new(&occluders, normal),
                     tree: &tree,
+                    occluders: &occluders,
+                    lift: normal * SHADOW_OFFSET,
                     rng: manylights_report::scenes::rng(rng.random()),
                     answers: [0; 3],
                 };
@@ -187,6 +200,7 @@ fn node_answers_agree_with_rays_and_keep_the_bound() {
                 for (total, a) in answers.iter_mut().zip(checked.answers) {
                     *total += a;
                 }
+                listed_rays += checked.host.listed_rays;
             }
         }
     }
@@ -194,6 +208,8 @@ fn node_answers_agree_with_rays_and_keep_the_bound() {
         answers.iter().all(|&a| a > 0),
         "answers (visible, occluded, partial) {answers:?}"
     );
+    // Rays through candidate lists were checked too.
+    assert!(listed_rays > 0, "no shadow ray used a candidate list");
 }
 
 /// Mean shadow rays and classifications per point of the tree at a certified
