@@ -382,6 +382,43 @@ fn coordinates_near_1e15() {
     check_all(&lights, base, Vec3::Z, VIEW);
 }
 
+#[test]
+fn coordinates_up_to_the_largest_allowed() {
+    let max = PointLight::MAX_COORDINATE;
+    // A cluster near the largest coordinate, seen from beside it and from
+    // one of its lights' coordinates.
+    let base = Vec3::splat(0.9 * max);
+    let lights: Vec<_> = random_lights(2000, 1.0, 15)
+        .into_iter()
+        .map(|l| PointLight::new(base + l.position * 1e15, l.intensity))
+        .collect();
+    check_all(&lights, base + Vec3::new(0.0, 0.0, -3e15), Vec3::Z, VIEW);
+    check_all(&lights, base, Vec3::Z, VIEW);
+    // Lights over the whole allowed cube, corners included: squared
+    // distances up to 1.2e37, beyond what the single-precision bound of
+    // children takes.
+    let mut spread: Vec<_> = random_lights(2000, max, 16);
+    for (i, corner) in [
+        Vec3::splat(max),
+        Vec3::splat(-max),
+        Vec3::new(max, -max, max),
+        Vec3::new(-max, max, -max),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        spread[i].position = corner;
+    }
+    check_all(&spread, Vec3::new(0.0, 0.0, -max), Vec3::Z, VIEW);
+    check_all(
+        &spread,
+        Vec3::new(0.5 * max, 0.25 * max, 0.0),
+        Vec3::Z,
+        VIEW,
+    );
+    check_all(&spread, Vec3::splat(-max), Vec3::ONE, VIEW);
+}
+
 fn lattice_scene() -> Vec<PointLight> {
     let mut rng = Rng(14);
     (0..3000)
