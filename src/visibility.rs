@@ -57,7 +57,8 @@ pub struct PointGroup {
 ///   and [`Coverage::Occluded`] only if every such segment is blocked. When
 ///   unsure it returns [`Coverage::Partial`], which is always correct.
 /// * [`visible`](Self::visible) is the exact point-to-point visibility `V_i`
-///   that the model (and `shade_exact`) uses.
+///   that the model (and `shade_exact`) uses, and
+///   [`visible_lights`](Self::visible_lights) answers as `visible` does.
 /// * [`classify_group`](Self::classify_group), for hosts that set
 ///   [`CLASSIFIES_GROUPS`](Self::CLASSIFIES_GROUPS), answers like `classify`
 ///   for every segment from any point of the group's box to any point of
@@ -101,6 +102,11 @@ pub struct PointGroup {
 ///   occluder the ray's own test could hit, so the ray answers as a
 ///   traversal does. In the report's city a list holds about ten buildings,
 ///   and a shadow ray costs a few box tests instead of a traversal.
+/// * [`visible_lights`](Self::visible_lights) gets the lights of a leaf
+///   that answered `Partial` (those that contribute anything), up to 16 at
+///   a time: their rays share the point and the leaf's list, and a host can
+///   test several of them against each listed occluder at once (the report's
+///   host, four in the lanes of a vector).
 /// * The cut stops asking in a call where small nodes keep answering
 ///   `Partial` (foliage, lattices), and a host stops keeping lists where
 ///   small nodes' shafts are crowded; then every light the cut needs is
@@ -123,6 +129,19 @@ pub trait Visibility {
 
     /// Whether the segment from `point` to a light at `light` is unoccluded.
     fn visible(&mut self, point: Vec3, light: Vec3) -> bool;
+
+    /// [`visible`](Self::visible) for each of `lights` from one `point`:
+    /// sets `seen[i]` to `visible(point, lights[i])` (`seen` is as long as
+    /// `lights`). The cut asks this way for the lights of a leaf it refines
+    /// (up to 16 at a time). The default asks [`visible`](Self::visible)
+    /// for each in order; a host may answer them together, e.g. testing
+    /// several segments against each occluder at once, as long as every
+    /// answer is the one `visible` gives.
+    fn visible_lights(&mut self, point: Vec3, lights: &[Vec3], seen: &mut [bool]) {
+        for (&light, seen) in lights.iter().zip(seen) {
+            *seen = self.visible(point, light);
+        }
+    }
 
     /// `true` for a host that answers [`classify_group`](Self::classify_group):
     /// batch shading then shares cuts between neighbouring points; for
@@ -189,6 +208,11 @@ impl<V: Visibility> Visibility for &mut V {
     #[inline]
     fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
         (**self).visible(point, light)
+    }
+
+    #[inline]
+    fn visible_lights(&mut self, point: Vec3, lights: &[Vec3], seen: &mut [bool]) {
+        (**self).visible_lights(point, lights, seen);
     }
 
     #[inline]

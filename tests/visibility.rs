@@ -366,6 +366,61 @@ fn occlusion_changes_the_street() {
     assert!(shadowed.count() >= 20);
 }
 
+/// A host that answers lights asked about together on its own (last
+/// first), counting them: the cut must come out as with the default, which
+/// asks [`Visibility::visible`] one light at a time.
+struct Batching {
+    host: Occluders,
+    /// Lights asked about together, and the calls that asked them.
+    batched: (u32, u32),
+}
+
+impl Visibility for Batching {
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
+        self.host.classify(point, node)
+    }
+
+    fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
+        self.host.visible(point, light)
+    }
+
+    fn visible_lights(&mut self, point: Vec3, lights: &[Vec3], seen: &mut [bool]) {
+        for (&light, seen) in lights.iter().zip(seen.iter_mut()).rev() {
+            *seen = !self.host.blocked(point, light);
+        }
+        self.batched.0 += lights.len() as u32;
+        self.batched.1 += 1;
+    }
+}
+
+#[test]
+fn lights_asked_together_shade_as_one_at_a_time() {
+    let (lights, walls) = street();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(0.7)));
+    let mut calls = 0;
+    for (p, n) in street_points() {
+        let query = Query::new(p, n).unwrap();
+        for t in street_thresholds() {
+            let mut alone = Occluders::new(walls.clone());
+            let one_by_one = shading.shade_query(&query, t, &mut alone).unwrap();
+            let mut together = Batching {
+                host: Occluders::new(walls.clone()),
+                batched: (0, 0),
+            };
+            let batched = shading.shade_query(&query, t, &mut together).unwrap();
+            assert_eq!(one_by_one, batched, "at {p} with {t:?}");
+            // Every light asked is counted once, whichever way it was asked.
+            assert_eq!(
+                batched.point_queries,
+                together.batched.0 + together.host.asked.len() as u32
+            );
+            calls += together.batched.1;
+        }
+    }
+    assert!(calls > 0, "no lights were asked about together");
+}
+
 // ---------------------------------------------------------------------------
 // Unoccluded: free
 // ---------------------------------------------------------------------------

@@ -7,7 +7,7 @@
 
 use std::ops::Range;
 
-use glam::{Vec2, Vec3, Vec3A, Vec4};
+use glam::{BVec4A, Vec2, Vec3, Vec3A, Vec4};
 use manylights::{Aabb, Coverage, NodeRegion, PointGroup, Visibility};
 use obvhs::aabb::Aabb as BvhAabb;
 
@@ -166,8 +166,15 @@ pub const FRACTION_POINTS: [Vec3; 4] = [
 ///
 /// The listed boxes form a tree (each under the smallest listed box that
 /// held it when it was listed), so the smallest list holding a box is found
-/// by descending from the roots. A shadow ray moves the box that blocks it
-/// to the front of its list, where the next light's ray tries it first. A
+/// by descending from the roots (from the last list kept, when it holds the
+/// box). A shadow ray moves the box that blocks it to the front of its
+/// list, where the next light's ray tries it first. A list keeps its boxes
+/// four to a quad too (per axis the four minima, then the maxima), so that
+/// a child's shaft filters its parent's list, and the single-blocker test
+/// scans a list, four boxes at a time; and the lights of a leaf, which the
+/// cut asks about together ([`Visibility::visible_lights`]), are tested
+/// four segments at a time against each box of the leaf's list, with the
+/// single ray's operations in each lane. A
 /// host whose small nodes' shafts keep meeting more boxes than a ray tests
 /// ([`GIVE_UP_CROWDED`]; foliage) stops gathering and classifies as above
 /// without lists.
@@ -256,12 +263,11 @@ impl<'o> Shadows<'o> {
             return self.classify_from(apex, &[apex], target, || Shaft::new(apex, target, MARGIN));
         }
         self.lists.aim(apex);
-        let parent = self.lists.find(target);
-        let parent_list = self
-            .lists
-            .range(parent)
-            .map(|range| &self.lists.slots[range]);
-        let early = parent_list.is_some_and(|l| l.len() <= EARLY_BLOCKER_LIST);
+        let parent = self.lists.find_near_last(target);
+        let parent_list = self.lists.range(parent);
+        let early = parent_list
+            .as_ref()
+            .is_some_and(|l| l.len() <= EARLY_BLOCKER_LIST);
         if let Some(list) = parent_list
             && early
             && self.blocks_all(list, apex, target)
@@ -272,7 +278,7 @@ impl<'o> Shadows<'o> {
             return self.answer(Coverage::Occluded);
         }
         let shaft = Shaft::new(apex, target, MARGIN);
-        let Some(start) = self.lists.gather(self.occluders, parent, &shaft, small) else {
+        let Some(gathered) = self.lists.gather(self.occluders, parent, &shaft, small) else {
             // Too many boxes meet the shaft: not visible.
             let (occluded, _) = self.single_blocker(apex, &[apex], target);
             return self.answer(if occluded {
@@ -281,38 +287,46 @@ impl<'o> Shadows<'o> {
                 Coverage::Partial
             });
         };
-        let gathered = &self.lists.slots[start..];
+        let start = gathered.start;
         let coverage = if gathered.is_empty() {
             Coverage::Visible
-        } else if !early && self.blocks_all(gathered, apex, target) {
+        } else if !early && self.blocks_all(gathered.clone(), apex, target) {
             // (From a short list, the boxes were tried above.)
             Coverage::Occluded
         } else {
             Coverage::Partial
         };
         if coverage == Coverage::Partial {
-            self.lists.keep(parent, target, start);
+            self.lists.keep(parent, target, gathered);
         } else {
-            self.lists.slots.truncate(start);
+            self.lists.truncate(start);
         }
         self.answer(coverage)
     }
 
-    /// Whether one of the boxes in `slots`, shrunk by [`MARGIN`], meets every
-    /// segment from `apex` to `target` (see "Classification"): the boxes that
-    /// meet the segment to the target's centre are tried against the
-    /// segments to its eight corners.
-    fn blocks_all(&self, slots: &[u32], apex: Vec3, target: &Aabb) -> bool {
+    /// Whether one of the listed boxes in `slots` (a range of
+    /// `Candidates::slots`), shrunk by [`MARGIN`], meets every segment from
+    /// `apex` to `target` (see "Classification"): the boxes that meet the
+    /// segment to the target's centre, found four at a time, are tried
+    /// against the segments to its eight corners.
+    fn blocks_all(&self, slots: Range<usize>, apex: Vec3, target: &Aabb) -> bool {
         let between = Segment::new(apex, 0.5 * (target.min + target.max));
         let mut fan = None;
-        slots.iter().any(|&slot| {
-            let o = self.occluders.get(slot as usize);
-            let core = BvhAabb::new(o.min + MARGIN, o.max - MARGIN);
-            core.valid()
-                && between.hits(&core)
-                && fan
+        self.lists.quads(slots).any(|(quad, lanes)| {
+            let mut mask = quad.core_hit_by(MARGIN, &between) & lanes;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let o = quad.lane(lane);
+                let core = BvhAabb::new(o.min + MARGIN, o.max - MARGIN);
+                if fan
                     .get_or_insert_with(|| Fan::new(apex, target))
                     .all_meet(&core)
+                {
+                    return true;
+                }
+            }
+            false
         })
     }
 
@@ -405,17 +419,18 @@ impl<'o> Shadows<'o> {
             Some(range) => {
                 self.listed_rays += 1;
                 let segment = Segment::new(apex, to);
-                let slots = &mut self.lists.slots[range];
+                let start = range.start;
                 let occluders = self.occluders;
-                match slots
+                match self.lists.slots[range]
                     .iter()
                     .position(|&slot| segment.hits(occluders.get(slot as usize)))
                 {
+                    Some(0) => false,
                     Some(k) => {
-                        // The next light's ray is tried against this box
-                        // first: neighbouring lights hide behind the same
+                        // The next light's ray tries this box first:
+                        // neighbouring lights hide behind the same
                         // building.
-                        slots.swap(0, k);
+                        self.lists.swap(start, start + k);
                         false
                     }
                     None => true,
@@ -447,6 +462,38 @@ impl Visibility for Shadows<'_> {
         self.ray(point + self.lift, light)
     }
 
+    /// The shadow rays of [`visible`](Self::visible), four at a time where
+    /// the last list kept holds every light (the lights of the leaf the cut
+    /// just asked about): each listed box is tested against four segments
+    /// at once, with the operations of the single ray's test, so every
+    /// answer is the one `visible` gives.
+    fn visible_lights(&mut self, point: Vec3, lights: &[Vec3], seen: &mut [bool]) {
+        let apex = point + self.lift;
+        let Some(range) = self.lists.holding_all(apex, lights) else {
+            for (&light, seen) in lights.iter().zip(seen) {
+                *seen = self.ray(apex, light);
+            }
+            return;
+        };
+        self.rays += lights.len() as u32;
+        self.listed_rays += lights.len() as u32;
+        let boxes = &self.lists.slots[range];
+        for (lights, seen) in lights.chunks(4).zip(seen.chunks_mut(4)) {
+            let fan = Rays::new(apex, lights);
+            let all = lanes(lights.len());
+            let mut blocked = 0;
+            for &slot in boxes {
+                blocked |= fan.hit(self.occluders.get(slot as usize));
+                if blocked & all == all {
+                    break;
+                }
+            }
+            for (k, seen) in seen.iter_mut().enumerate() {
+                *seen = blocked & (1 << k) == 0;
+            }
+        }
+    }
+
     /// With the fraction on, the share of [`FRACTION_POINTS`] of the node's
     /// box (and its centroid) that a shadow ray reaches; `None` otherwise.
     /// See the type's documentation, "Visible fraction".
@@ -469,8 +516,13 @@ impl Visibility for Shadows<'_> {
 /// No list: the end of a chain of lists.
 const NO_LIST: u32 = u32::MAX;
 
+/// The slot that pads a list to a whole number of [`Quad`]s (its lanes are
+/// never read).
+const PAD: u32 = u32::MAX;
+
 /// A candidate list: the boxes that meet the shaft from the apex to
-/// `target`, in `Candidates::slots[start..start + len]`.
+/// `target`, in `Candidates::slots[start..start + len]`, `start` a multiple
+/// of four.
 #[derive(Clone, Copy, Debug)]
 struct List {
     target: Aabb,
@@ -482,15 +534,101 @@ struct List {
     sibling: u32,
 }
 
+/// Four listed boxes side by side: per axis their minima and their maxima,
+/// one box a lane, so that a shaft or a segment is tested against four
+/// boxes at once.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Quad {
+    min: [[f32; 4]; 3],
+    max: [[f32; 4]; 3],
+}
+
+impl Quad {
+    /// Four lanes of nothing (never read).
+    const UNUSED: Quad = Quad {
+        min: [[0.0; 4]; 3],
+        max: [[0.0; 4]; 3],
+    };
+
+    /// The minima (or maxima) of the four boxes along `axis`.
+    #[inline]
+    fn min(&self, axis: usize) -> Vec4 {
+        Vec4::from_array(self.min[axis])
+    }
+
+    #[inline]
+    fn max(&self, axis: usize) -> Vec4 {
+        Vec4::from_array(self.max[axis])
+    }
+
+    /// Sets lane `lane` to the box `b`.
+    #[inline]
+    fn set(&mut self, lane: usize, b: &BvhAabb) {
+        for axis in 0..3 {
+            self.min[axis][lane] = b.min[axis];
+            self.max[axis][lane] = b.max[axis];
+        }
+    }
+
+    /// Sets lane `lane` to lane `from` of `quad`.
+    #[inline]
+    fn copy_lane(&mut self, lane: usize, quad: &Quad, from: usize) {
+        for axis in 0..3 {
+            self.min[axis][lane] = quad.min[axis][from];
+            self.max[axis][lane] = quad.max[axis][from];
+        }
+    }
+
+    /// The box in lane `lane`.
+    #[inline]
+    fn lane(&self, lane: usize) -> BvhAabb {
+        let at = |v: &[[f32; 4]; 3]| Vec3A::new(v[0][lane], v[1][lane], v[2][lane]);
+        BvhAabb::new(at(&self.min), at(&self.max))
+    }
+
+    /// Bit `k` set where box `k`, shrunk by `margin`, is not empty and
+    /// meets `segment` (the slab test of [`Segment::hits`], four lanes at a
+    /// time).
+    #[inline]
+    fn core_hit_by(&self, margin: f32, segment: &Segment) -> u32 {
+        let margin = Vec4::splat(margin);
+        let mut valid = BVec4A::TRUE;
+        let mut near = Vec4::NEG_INFINITY;
+        let mut far = Vec4::INFINITY;
+        for axis in 0..3 {
+            let (lo, hi) = (self.min(axis) + margin, self.max(axis) - margin);
+            valid &= lo.cmple(hi);
+            let from = Vec4::splat(segment.from[axis]);
+            let inv = Vec4::splat(segment.inv_dir[axis]);
+            let t0 = (lo - from) * inv;
+            let t1 = (hi - from) * inv;
+            near = near.max(t0.min(t1));
+            far = far.min(t0.max(t1));
+        }
+        (valid & near.cmple(far) & far.cmpge(Vec4::ZERO) & near.cmple(Vec4::ONE)).bitmask()
+    }
+}
+
+/// The lanes in use of a quad with `left` boxes from its first lane on.
+#[inline]
+fn lanes(left: usize) -> u32 {
+    (1u32 << left.min(4)) - 1
+}
+
 /// The candidate lists of one apex (see "Candidate lists" in [`Shadows`]),
 /// and how gathering has gone.
 #[derive(Debug)]
 struct Candidates {
     /// The apex the lists belong to.
     apex: Option<Vec3>,
-    /// The lists' occluder slots, back to back; the end is scratch for the
-    /// list being gathered.
+    /// The lists' occluder slots, back to back, each list padded with
+    /// [`PAD`] to a multiple of four; the end is scratch for the list being
+    /// gathered.
     slots: Vec<u32>,
+    /// The boxes of `slots`, four to a quad: those of `slots[4 k..4 k + 4]`
+    /// are `quads[k]`.
+    quads: Vec<Quad>,
     lists: Vec<List>,
     /// The first list under no other, and the last one kept.
     root: u32,
@@ -506,6 +644,7 @@ impl Default for Candidates {
         Self {
             apex: None,
             slots: Vec::new(),
+            quads: Vec::new(),
             lists: Vec::new(),
             root: NO_LIST,
             last: NO_LIST,
@@ -532,6 +671,7 @@ impl Candidates {
         if self.apex != Some(apex) {
             self.apex = Some(apex);
             self.slots.clear();
+            self.quads.clear();
             self.lists.clear();
             self.root = NO_LIST;
             self.last = NO_LIST;
@@ -554,71 +694,140 @@ impl Candidates {
         found
     }
 
+    /// A list whose box holds `target`: the smallest under the last list
+    /// kept if that one holds it (the cut asks about a node's children
+    /// soon after the node answered partial), else [`find`](Self::find)'s.
+    /// Any list whose box holds the target holds every box that meets the
+    /// target's shaft, so either serves.
+    fn find_near_last(&self, target: &Aabb) -> u32 {
+        match self.lists.get(self.last as usize) {
+            Some(last) if holds(&last.target, target) => {
+                let (mut found, mut at) = (self.last, last.child);
+                while at != NO_LIST {
+                    let list = &self.lists[at as usize];
+                    if holds(&list.target, target) {
+                        found = at;
+                        at = list.child;
+                    } else {
+                        at = list.sibling;
+                    }
+                }
+                found
+            }
+            _ => self.find(target),
+        }
+    }
+
     /// Where the boxes of list `index` lie in `slots`, `None` for
     /// `NO_LIST`.
+    #[inline]
     fn range(&self, index: u32) -> Option<Range<usize>> {
         let list = self.lists.get(index as usize)?;
         Some(list.start as usize..(list.start + list.len) as usize)
     }
 
-    /// Gathers the boxes that may meet `shaft` (from the list `parent`, the
-    /// smallest that holds the shaft's target, else the BVH) at the end of
-    /// `slots`, and returns where they start, or `None` (nothing gathered)
-    /// when more than [`CANDIDATES_MAX`] meet it; `small` says whether the
-    /// target is a small node's box.
+    /// The quads of the listed boxes `slots` (a range starting at a
+    /// multiple of four), each with the mask of its lanes in the range.
+    #[inline]
+    fn quads(&self, slots: Range<usize>) -> impl Iterator<Item = (&Quad, u32)> {
+        let first = slots.start / 4;
+        let len = slots.len();
+        self.quads[first..first + len.div_ceil(4)]
+            .iter()
+            .enumerate()
+            .map(move |(k, quad)| (quad, lanes(len - 4 * k)))
+    }
+
+    /// Moves the listed box in slot `at` to slot `to` and the one there to
+    /// `at`.
+    #[inline]
+    fn swap(&mut self, to: usize, at: usize) {
+        self.slots.swap(to, at);
+        let (q_to, q_at) = (self.quads[to / 4], self.quads[at / 4]);
+        self.quads[to / 4].copy_lane(to % 4, &q_at, at % 4);
+        self.quads[at / 4].copy_lane(at % 4, &q_to, to % 4);
+    }
+
+    /// Drops every slot from `start` (a multiple of four) on.
+    fn truncate(&mut self, start: usize) {
+        self.slots.truncate(start);
+        self.quads.truncate(start / 4);
+    }
+
+    /// Gathers the boxes that may meet `shaft` at the end of `slots`, with
+    /// their quads: from the list `parent`, the smallest that holds the
+    /// shaft's target, four at a time, else from the BVH. Returns the range
+    /// of the gathered boxes, or `None` (nothing gathered) when more than
+    /// [`CANDIDATES_MAX`] meet it; `small` says whether the target is a
+    /// small node's box.
     fn gather(
         &mut self,
         occluders: &Occluders,
         parent: u32,
         shaft: &Shaft,
         small: bool,
-    ) -> Option<usize> {
+    ) -> Option<Range<usize>> {
         self.small_shafts += u32::from(small);
         let start = self.slots.len();
-        if parent != NO_LIST {
-            let list = self.lists[parent as usize];
-            for k in list.start..list.start + list.len {
-                let slot = self.slots[k as usize];
-                if shaft.meets(occluders.get(slot as usize)) {
+        debug_assert_eq!(start % 4, 0, "lists start at a quad");
+        let mut out = Quad::UNUSED;
+        let mut count = 0;
+        if let Some(range) = self.range(parent) {
+            let test = QuadShaft::new(shaft);
+            let first = range.start / 4;
+            for k in 0..range.len().div_ceil(4) {
+                let quad = self.quads[first + k];
+                let mut mask = test.meets(&quad) & lanes(range.len() - 4 * k);
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let slot = self.slots[range.start + 4 * k + lane];
                     self.slots.push(slot);
+                    out.copy_lane(count % 4, &quad, lane);
+                    count += 1;
+                    if count % 4 == 0 {
+                        self.quads.push(out);
+                    }
                 }
             }
-            self.crowded(start, small);
-            return Some(start);
+        } else {
+            let (slots, quads) = (&mut self.slots, &mut self.quads);
+            let overflow = occluders.any_slot_in(
+                |b| shaft.meets(b),
+                |slot, b| {
+                    if !shaft.meets(b) {
+                        return false;
+                    }
+                    if count == CANDIDATES_MAX {
+                        return true;
+                    }
+                    slots.push(slot as u32);
+                    out.set(count % 4, b);
+                    count += 1;
+                    if count % 4 == 0 {
+                        quads.push(out);
+                    }
+                    false
+                },
+            );
+            if overflow {
+                self.small_crowded += u32::from(small);
+                self.truncate(start);
+                return None;
+            }
         }
-        let slots = &mut self.slots;
-        let overflow = occluders.any_slot_in(
-            |b| shaft.meets(b),
-            |slot, b| {
-                if !shaft.meets(b) {
-                    return false;
-                }
-                if slots.len() - start == CANDIDATES_MAX {
-                    return true;
-                }
-                slots.push(slot as u32);
-                false
-            },
-        );
-        if overflow {
-            self.small_crowded += u32::from(small);
-            self.slots.truncate(start);
-            return None;
+        if count % 4 != 0 {
+            self.quads.push(out);
+            self.slots.resize(start + 4 * count.div_ceil(4), PAD);
         }
-        self.crowded(start, small);
-        Some(start)
-    }
-
-    /// Counts a small node's shaft whose boxes, gathered from `start` on,
-    /// are more than a shadow ray tests.
-    fn crowded(&mut self, start: usize, small: bool) {
-        let crowded = self.slots.len() - start > RAY_LIST_MAX as usize;
+        let crowded = count > RAY_LIST_MAX as usize;
         self.small_crowded += u32::from(small && crowded);
+        Some(start..start + count)
     }
 
-    /// Keeps the boxes gathered from `start` on as the list of `target`,
-    /// under the list `parent` they came from.
-    fn keep(&mut self, parent: u32, target: &Aabb, start: usize) {
+    /// Keeps the boxes `gathered` (the last gathered) as the list of
+    /// `target`, under the list `parent` they came from.
+    fn keep(&mut self, parent: u32, target: &Aabb, gathered: Range<usize>) {
         let index = self.lists.len() as u32;
         let sibling = if parent == NO_LIST {
             std::mem::replace(&mut self.root, index)
@@ -627,18 +836,33 @@ impl Candidates {
         };
         self.lists.push(List {
             target: *target,
-            start: start as u32,
-            len: (self.slots.len() - start) as u32,
+            start: gathered.start as u32,
+            len: gathered.len() as u32,
             child: NO_LIST,
             sibling,
         });
         self.last = index;
     }
 
+    /// Where the boxes of the last list kept lie in `slots`, if it belongs
+    /// to `apex`, holds every one of `points` and has at most
+    /// [`RAY_LIST_MAX`] boxes: every box a segment from the apex to one of
+    /// the points meets is on it (see "Candidate lists").
+    #[inline]
+    fn holding_all(&self, apex: Vec3, points: &[Vec3]) -> Option<Range<usize>> {
+        if self.apex != Some(apex) {
+            return None;
+        }
+        let list = self.lists.get(self.last as usize)?;
+        let inside = |p: &Vec3| list.target.min.cmple(*p).all() && p.cmple(list.target.max).all();
+        (list.len <= RAY_LIST_MAX && points.iter().all(inside)).then(|| self.range(self.last))?
+    }
+
     /// Where the boxes of the smallest list of `apex` whose box holds
     /// `point` lie in `slots` (the last list kept is tried first: the cut
     /// casts rays to a node's lights right after the node answered partial),
     /// if there is one of at most [`RAY_LIST_MAX`] boxes.
+    #[inline]
     fn holding(&self, apex: Vec3, point: Vec3) -> Option<Range<usize>> {
         if self.apex != Some(apex) {
             return None;
@@ -653,6 +877,44 @@ impl Candidates {
         }
         self.range(index)
             .filter(|range| range.len() <= RAY_LIST_MAX as usize)
+    }
+}
+
+/// A shaft from a point ([`Shaft::new`]) set up for [`Quad`]s: its bounding
+/// box and its planes `[n_i, n_j, offset]` (axes of [`PAIR_AXES`]), each
+/// number in every lane.
+struct QuadShaft {
+    min: [Vec4; 3],
+    max: [Vec4; 3],
+    planes: [[Vec4; 3]; 6],
+}
+
+impl QuadShaft {
+    #[inline]
+    fn new(shaft: &Shaft) -> QuadShaft {
+        QuadShaft {
+            min: [0, 1, 2].map(|axis| Vec4::splat(shaft.min[axis])),
+            max: [0, 1, 2].map(|axis| Vec4::splat(shaft.max[axis])),
+            planes: shaft.pairs.map(|plane| plane.map(Vec4::splat)),
+        }
+    }
+
+    /// [`Shaft::meets`] for the four boxes of `quad` at once: bit `k` set
+    /// where box `k` may meet the shaft (the same sums, without the zero
+    /// terms of the axis each plane of a shaft from a point lacks).
+    #[inline]
+    fn meets(&self, quad: &Quad) -> u32 {
+        let mut out = BVec4A::FALSE;
+        for axis in 0..3 {
+            out |= quad.min(axis).cmpgt(self.max[axis]) | quad.max(axis).cmplt(self.min[axis]);
+        }
+        for (k, [n_i, n_j, offset]) in self.planes.iter().enumerate() {
+            let (i, j) = PAIR_AXES[k / 2];
+            let least = (*n_i * quad.min(i)).min(*n_i * quad.max(i))
+                + (*n_j * quad.min(j)).min(*n_j * quad.max(j));
+            out |= least.cmpgt(*offset);
+        }
+        !out.bitmask() & 0xF
     }
 }
 
@@ -681,7 +943,16 @@ pub struct Shaft {
     max: Vec3A,
     normal: [[Vec4; PLANE_LANES / 4]; 3],
     offset: [Vec4; PLANE_LANES / 4],
+    /// The planes of a shaft from a point ([`Shaft::new`]) again, each as
+    /// `[n_i, n_j, offset]` with the axes `(i, j)` of [`PAIR_AXES`] (two
+    /// planes per projection), for [`Shaft::meets_quad`]; every plane holds
+    /// every point in a shaft between boxes.
+    pairs: [[f32; 3]; 6],
 }
+
+/// The axes `(i, j)` of the planes `2 k` and `2 k + 1` of a shaft from a
+/// point: the projections along z, x and y.
+const PAIR_AXES: [(usize, usize); 3] = [(0, 1), (1, 2), (2, 0)];
 
 impl Shaft {
     /// Only the bounding box of `min` and `max`: every plane holds every
@@ -692,6 +963,7 @@ impl Shaft {
             max,
             normal: [[Vec4::ZERO; PLANE_LANES / 4]; 3],
             offset: [Vec4::INFINITY; PLANE_LANES / 4],
+            pairs: [[0.0, 0.0, f32::INFINITY]; 6],
         }
     }
 
@@ -731,6 +1003,9 @@ impl Shaft {
             let [a, b, offset] = along_y[m];
             shaft.set_plane(4 + m, (2, a), (0, b), offset);
         }
+        shaft.pairs = [
+            along_z[0], along_z[1], along_x[0], along_x[1], along_y[0], along_y[1],
+        ];
         shaft
     }
 
@@ -852,6 +1127,47 @@ fn silhouette(q: [f32; 2], lo: [f32; 2], hi: [f32; 2], margin: f32) -> [[f32; 3]
         [n_i, n_j, reach + margin * (n_i.abs() + n_j.abs())]
     };
     [line(corners[0]), line(corners[1])]
+}
+
+/// Up to four segments from one point, set up for slab tests four at a time:
+/// lane `k` is the segment of [`Segment::new`] to the `k`-th end (the last
+/// end fills the lanes beyond the ends).
+struct Rays {
+    from: Vec3A,
+    /// Per axis, `1 / (end - from)`.
+    inv_dir: [Vec4; 3],
+}
+
+impl Rays {
+    #[inline]
+    fn new(from: Vec3, ends: &[Vec3]) -> Rays {
+        let end = |k: usize| ends[k.min(ends.len() - 1)];
+        let axis =
+            |a: usize| Vec4::new(end(0)[a], end(1)[a], end(2)[a], end(3)[a]) - Vec4::splat(from[a]);
+        Rays {
+            from: from.into(),
+            inv_dir: [0, 1, 2].map(|a| Vec4::ONE / axis(a)),
+        }
+    }
+
+    /// Bit `k` set where segment `k` meets the closed box `b`: the slab test
+    /// of [`Segment::hits`], lane by lane with the same operations in the
+    /// same order (`Vec3A`'s smallest and largest element reduce as
+    /// `min(min(x, z), min(y, z))`), so each answer is bit for bit the one
+    /// segment's.
+    #[inline]
+    fn hit(&self, b: &BvhAabb) -> u32 {
+        let (lo, hi) = (b.min - self.from, b.max - self.from);
+        let t = |axis: usize| {
+            let t0 = Vec4::splat(lo[axis]) * self.inv_dir[axis];
+            let t1 = Vec4::splat(hi[axis]) * self.inv_dir[axis];
+            (t0.min(t1), t0.max(t1))
+        };
+        let ((near_x, far_x), (near_y, far_y), (near_z, far_z)) = (t(0), t(1), t(2));
+        let near = near_x.max(near_z).max(near_y.max(near_z));
+        let far = far_x.min(far_z).min(far_y.min(far_z));
+        (near.cmple(far) & far.cmpge(Vec4::ZERO) & near.cmple(Vec4::ONE)).bitmask()
+    }
 }
 
 /// The segments from a point to the eight corners of a box, set up for slab

@@ -3,8 +3,9 @@
 //! one of many points, and a box it calls occluded by none; asked through
 //! the crate's cut, the same holds for every node's lights, and the
 //! certified bound holds against the exact shadowed sum, and every shadow
-//! ray through a candidate list answers as the BVH does. The cut keeps
-//! classifying in the city and gives up under the canopy.
+//! ray through a candidate list, alone or four at a time, answers as the
+//! BVH does. The cut keeps classifying in the city and gives up under the
+//! canopy.
 
 use glam::Vec3;
 use manylights::{
@@ -125,6 +126,8 @@ struct Checked<'a> {
     lift: Vec3,
     rng: SceneRng,
     answers: [usize; 3],
+    /// Lights asked about together ([`Visibility::visible_lights`]).
+    batched: usize,
 }
 
 impl Visibility for Checked<'_> {
@@ -156,6 +159,19 @@ impl Visibility for Checked<'_> {
         seen
     }
 
+    fn visible_lights(&mut self, point: Vec3, lights: &[Vec3], seen: &mut [bool]) {
+        self.host.visible_lights(point, lights, seen);
+        for (&light, &seen) in lights.iter().zip(seen.iter()) {
+            assert_eq!(
+                seen,
+                !self.occluders.blocked(point + self.lift, light),
+                "the shadow ray from {point} to {light} (asked with others) differs from the \
+                 BVH's"
+            );
+        }
+        self.batched += lights.len();
+    }
+
     fn visible_fraction(&mut self, point: Vec3, node: &NodeRegion) -> Option<f32> {
         self.host.visible_fraction(point, node)
     }
@@ -163,7 +179,7 @@ impl Visibility for Checked<'_> {
 
 #[test]
 fn node_answers_agree_with_rays_and_keep_the_bound() {
-    let (mut answers, mut listed_rays) = ([0usize; 3], 0);
+    let (mut answers, mut listed_rays, mut batched) = ([0usize; 3], 0, 0);
     for seed in 0..SCENES / 4 {
         let mut rng = rng(1_000 + seed);
         let boxes = random_occluders(&mut rng);
@@ -194,6 +210,7 @@ fn node_answers_agree_with_rays_and_keep_the_bound() {
                     lift: normal * SHADOW_OFFSET,
                     rng: manylights_report::scenes::rng(rng.random()),
                     answers: [0; 3],
+                    batched: 0,
                 };
                 let r = shading.shade_query(&query, t, &mut checked).unwrap();
                 assert!(r.certifies(exact), "seed {seed}: {r:?} against {exact}");
@@ -201,6 +218,7 @@ fn node_answers_agree_with_rays_and_keep_the_bound() {
                     *total += a;
                 }
                 listed_rays += checked.host.listed_rays;
+                batched += checked.batched;
             }
         }
     }
@@ -210,6 +228,8 @@ fn node_answers_agree_with_rays_and_keep_the_bound() {
     );
     // Rays through candidate lists were checked too.
     assert!(listed_rays > 0, "no shadow ray used a candidate list");
+    // So were lights asked about together.
+    assert!(batched > 0, "no lights were asked about together");
 }
 
 /// Mean shadow rays and classifications per point of the tree at a certified

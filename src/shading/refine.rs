@@ -578,8 +578,41 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             let values = &mut values[..lights.len()];
             self.shader
                 .eval_lights(&self.per_point, self.surface, lights, values);
-            for (light, value) in lights.iter().zip(values.iter()) {
-                self.settle_light(light.position, *value, seen, weight);
+            if seen == Seen::Visible || V::ALWAYS_VISIBLE {
+                for (light, value) in lights.iter().zip(values.iter()) {
+                    self.settle_light(light.position, *value, seen, weight);
+                }
+            } else {
+                self.settle_asked(lights, values, weight);
+            }
+        }
+    }
+
+    /// [`settle_light`](Self::settle_light) for each of `lights` (at most
+    /// [`SUM_LIGHTS_MAX`]) of unknown visibility, with their exact
+    /// contributions `values`: the host is asked about those that
+    /// contribute anything all at once ([`Visibility::visible_lights`]),
+    /// and the visible ones are settled in order.
+    #[inline(always)]
+    fn settle_asked(&mut self, lights: &[PointLight], values: &[DVec3], weight: f64) {
+        let mut positions = [Vec3::ZERO; SUM_LIGHTS_MAX];
+        let mut which = [0u8; SUM_LIGHTS_MAX];
+        let mut asked = 0;
+        for (k, (light, value)) in lights.iter().zip(values).enumerate() {
+            if *value != DVec3::ZERO {
+                positions[asked] = light.position;
+                which[asked] = k as u8;
+                asked += 1;
+            }
+        }
+        self.lights += lights.len() as u32;
+        self.point_queries += asked as u32;
+        let mut seen = [false; SUM_LIGHTS_MAX];
+        self.visibility
+            .visible_lights(self.point, &positions[..asked], &mut seen[..asked]);
+        for (&k, &seen) in which[..asked].iter().zip(&seen[..asked]) {
+            if seen {
+                self.settled.add(values[usize::from(k)] * weight);
             }
         }
     }
