@@ -184,3 +184,37 @@ fn a_few_hundred_lights_are_summed_whole_where_the_sums_are_coarse() {
     assert!(fine.nodes_evaluated > 1, "{fine:?}");
     assert!(fine.certifies(exact), "{fine:?}");
 }
+
+/// A point on the ground far beyond the edge of the street city of 10^6
+/// lamps sees every lamp at a grazing angle, where each node is worth a
+/// small fraction of `I kd / D^2`, the scale of the single-precision bounds'
+/// rounding (which also grows with the distance): a certified 1% must not
+/// drive the cut down to single lights (it once took 60,000 evaluations
+/// here). It costs about what the `f64` bounds need (those of a relative
+/// target below the single-precision bounds' range, which meets 1% too).
+#[test]
+fn a_point_far_beyond_the_edge_of_a_city_sees_it_at_a_grazing_angle() {
+    let lights = manylights_report::scenes::city_lights(1_000_000, 1998);
+    let tree = LightTree::build(&lights).expect("valid lights");
+    let mut shading = tree.shading(Lambert::new(Vec3::ONE));
+    for point in [
+        Vec3::new(-7_700.0, 60_300.0, 0.0),
+        Vec3::new(52_500.0, 37_700.0, 0.0),
+        Vec3::new(-2_700.0, 58_400.0, 0.0),
+    ] {
+        let coarse = shading
+            .shade(point, Vec3::Z, Threshold::relative(0.01))
+            .expect("valid point");
+        // Below 2^-12: bounds in f64 throughout, and still within 1%.
+        let fine = shading
+            .shade(point, Vec3::Z, Threshold::relative(2e-4))
+            .expect("valid point");
+        let exact = shading.exact(point, Vec3::Z).expect("valid point");
+        assert!(coarse.certifies(exact) && fine.certifies(exact));
+        let (cost, f64_cost) = (coarse.cost(), fine.cost());
+        assert!(
+            cost <= 2 * f64_cost + 1024,
+            "at {point}: {cost} evaluations at 1% against {f64_cost} with f64 bounds at 0.02%"
+        );
+    }
+}

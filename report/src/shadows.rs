@@ -681,7 +681,12 @@ impl Candidates {
     /// The smallest list whose box holds `target`, found down the tree of
     /// lists (`NO_LIST` if none does).
     fn find(&self, target: &Aabb) -> u32 {
-        let (mut found, mut at) = (NO_LIST, self.root);
+        self.descend(NO_LIST, self.root, target)
+    }
+
+    /// The smallest list whose box holds `target` among `at`, its siblings
+    /// and their descendants, else `found`.
+    fn descend(&self, mut found: u32, mut at: u32, target: &Aabb) -> u32 {
         while at != NO_LIST {
             let list = &self.lists[at as usize];
             if holds(&list.target, target) {
@@ -702,17 +707,7 @@ impl Candidates {
     fn find_near_last(&self, target: &Aabb) -> u32 {
         match self.lists.get(self.last as usize) {
             Some(last) if holds(&last.target, target) => {
-                let (mut found, mut at) = (self.last, last.child);
-                while at != NO_LIST {
-                    let list = &self.lists[at as usize];
-                    if holds(&list.target, target) {
-                        found = at;
-                        at = list.child;
-                    } else {
-                        at = list.sibling;
-                    }
-                }
-                found
+                self.descend(self.last, last.child, target)
             }
             _ => self.find(target),
         }
