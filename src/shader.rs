@@ -220,10 +220,13 @@ pub trait Shader {
     /// The cut calls it with the children it would bound, in place of
     /// [`bound_nodes`](Self::bound_nodes), when the threshold is a
     /// relative target of at least `2^-12` (about `2.4e-4`; without
-    /// interpolation across levels), where its coarser rounding is a
-    /// negligible part of the target. [`Lambert`] with its default
+    /// interpolation across levels), where its coarser rounding is
+    /// usually a negligible part of the target, and until the cut has
+    /// evaluated 512 nodes: seen at a grazing angle a node is worth a small
+    /// fraction of `I kd / D^2`, the rounding's scale, and a cut that long
+    /// bounds in `f64` from then on. [`Lambert`] with its default
     /// [`BoundKind::Series`](crate::BoundKind::Series) bounds the children
-    /// side by side in one vector of eight `f32` lanes; a sum of shaders
+    /// side by side in one vector of four or eight `f32` lanes; a sum of shaders
     /// ([`Combined`]) does where both of its terms do.
     ///
     /// [`Lambert`]: crate::Lambert
