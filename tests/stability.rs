@@ -371,15 +371,25 @@ fn coordinates_near_1e_minus_20() {
     check_all(&lights, Vec3::new(1e-21, 0.0, 0.0), Vec3::Z, VIEW);
 }
 
+/// 2000 random lights within `size` of `base`, checked from `3 size` below
+/// `base` and from `base` itself.
+fn check_cluster(base: Vec3, size: f32, seed: u64) {
+    let lights: Vec<_> = random_lights(2000, 1.0, seed)
+        .into_iter()
+        .map(|l| PointLight::new(base + l.position * size, l.intensity))
+        .collect();
+    check_all(
+        &lights,
+        base + Vec3::new(0.0, 0.0, -3.0 * size),
+        Vec3::Z,
+        VIEW,
+    );
+    check_all(&lights, base, Vec3::Z, VIEW);
+}
+
 #[test]
 fn coordinates_near_1e15() {
-    let base = Vec3::splat(1e15);
-    let lights: Vec<_> = random_lights(2000, 1.0, 13)
-        .into_iter()
-        .map(|l| PointLight::new(base + l.position * 1e12, l.intensity))
-        .collect();
-    check_all(&lights, base + Vec3::new(0.0, 0.0, -3e12), Vec3::Z, VIEW);
-    check_all(&lights, base, Vec3::Z, VIEW);
+    check_cluster(Vec3::splat(1e15), 1e12, 13);
 }
 
 #[test]
@@ -387,13 +397,7 @@ fn coordinates_up_to_the_largest_allowed() {
     let max = PointLight::MAX_COORDINATE;
     // A cluster near the largest coordinate, seen from beside it and from
     // one of its lights' coordinates.
-    let base = Vec3::splat(0.9 * max);
-    let lights: Vec<_> = random_lights(2000, 1.0, 15)
-        .into_iter()
-        .map(|l| PointLight::new(base + l.position * 1e15, l.intensity))
-        .collect();
-    check_all(&lights, base + Vec3::new(0.0, 0.0, -3e15), Vec3::Z, VIEW);
-    check_all(&lights, base, Vec3::Z, VIEW);
+    check_cluster(Vec3::splat(0.9 * max), 1e15, 15);
     // Lights over the whole allowed cube, corners included: squared
     // distances up to 1.2e37, beyond what the single-precision bound of
     // children takes.
