@@ -1,6 +1,8 @@
 //! Criterion bench of the tree build: `LightTree::build` over city street
-//! lamps (the report's layout, fixed density), 10^3 to 10^6 lights, and
-//! `LightTree::build_parallel` (the same tree on rayon's pool) from 10^5.
+//! lamps (the report's layout, fixed density), 10^3 to 10^6 lights,
+//! `LightTree::rebuild` (the same tree, in the memory of one built before)
+//! and `LightTree::build_parallel` (the same tree on rayon's pool) from
+//! 10^5.
 //!
 //! ```text
 //! cargo bench --bench build
@@ -46,6 +48,10 @@ fn build(c: &mut Criterion) {
         }
         group.bench_with_input(BenchmarkId::new("one thread", n), &lights, |b, lights| {
             b.iter(|| LightTree::build(black_box(lights)).expect("valid lights"));
+        });
+        group.bench_with_input(BenchmarkId::new("rebuild", n), &lights, |b, lights| {
+            let mut tree = LightTree::build(lights).expect("valid lights");
+            b.iter(|| tree.rebuild(black_box(lights)).expect("valid lights"));
         });
         if n >= PARALLEL_FROM {
             group.bench_with_input(BenchmarkId::new("pool", n), &lights, |b, lights| {

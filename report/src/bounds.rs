@@ -117,18 +117,21 @@ const BUILD_ROUNDS: usize = 3;
 /// The build table: per size, the first build in the process (from the
 /// bounds table above, up to 10^6 lights), then the median of
 /// [`BUILD_ROUNDS`] builds on one thread alternating with as many on
-/// rayon's pool (`build_parallel`, the same tree), the memory and the nodes
-/// per light.
+/// rayon's pool (`build_parallel`, the same tree) and as many rebuilds on
+/// one thread of a tree of the same lights in the memory it holds
+/// (`rebuild`, the same tree again), the memory and the nodes per light.
 fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
     let threads = rayon::current_num_threads();
     println!(
-        "| lights | first build / light | build / light, one thread | build / light, {threads} threads | one / {threads} threads | memory / light (lights included) | nodes / light |"
+        "| lights | first build / light | build / light, one thread | build / light, {threads} threads | one / {threads} threads | rebuild in place / light, one thread | build / rebuild | memory / light (lights included) | nodes / light |"
     );
-    println!("|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for (k, count) in BUILD_SIZES.into_iter().enumerate() {
         let lights = coloured(&crate::scenes::city_lights(count, SEED), SEED ^ 0x7147);
-        let (mut one, mut pool) = (Vec::new(), Vec::new());
+        let (mut one, mut pool, mut again) = (Vec::new(), Vec::new(), Vec::new());
         let mut size = (0, 0);
+        // Rebuilt over and over, as a renderer would each frame.
+        let mut kept = LightTree::build(&lights)?;
         for _ in 0..BUILD_ROUNDS {
             let start = Instant::now();
             let tree = LightTree::build(&lights)?;
@@ -139,17 +142,23 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
             let tree = LightTree::build_parallel(&lights)?;
             pool.push(start.elapsed().as_secs_f64());
             drop(tree);
+            let start = Instant::now();
+            kept.rebuild(&lights)?;
+            again.push(start.elapsed().as_secs_f64());
         }
-        let (one, pool) = (median(one), median(pool));
+        drop(kept);
+        let (one, pool, again) = (median(one), median(pool), median(again));
         let per_light = |t: f64| t * 1e9 / count as f64;
         let first = first
             .get(k)
             .map_or("-".to_string(), |&t| format!("{:.0} ns", per_light(t)));
         println!(
-            "| {count} | {first} | {:.0} ns | {:.0} ns | {:.2}x | {:.0} B | {:.2} |",
+            "| {count} | {first} | {:.0} ns | {:.0} ns | {:.2}x | {:.0} ns | {:.2}x | {:.0} B | {:.2} |",
             per_light(one),
             per_light(pool),
             one / pool,
+            per_light(again),
+            one / again,
             size.0 as f64 / count as f64,
             size.1 as f64 / count as f64
         );

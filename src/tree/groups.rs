@@ -124,7 +124,17 @@ impl NodeGroups {
 
     /// [`NodeGroups::new`], the blocks filled on `pool` (the same blocks).
     pub(crate) fn new_on(nodes: &[Node], pool: Pool) -> Self {
-        let mut at = vec![NO_BLOCK; nodes.len()];
+        let mut groups = Self::default();
+        groups.refill(nodes, pool);
+        groups
+    }
+
+    /// Makes these the blocks of `nodes`, filled on `pool`, in the memory
+    /// they hold (the same blocks as [`NodeGroups::new_on`]).
+    pub(crate) fn refill(&mut self, nodes: &[Node], pool: Pool) {
+        let at = &mut self.at;
+        at.clear();
+        at.resize(nodes.len(), NO_BLOCK);
         let (mut fours, mut eights) = (Vec::new(), Vec::new());
         for (index, parent) in nodes.iter().enumerate() {
             if parent.is_leaf() {
@@ -147,11 +157,8 @@ impl NodeGroups {
                 Pool::ONE
             }
         };
-        Self {
-            fours: on(fours.len()).map(&fours, |i| Block::of(block(i))),
-            eights: on(eights.len()).map(&eights, |i| Block::of(block(i))),
-            at,
-        }
+        on(fours.len()).map_into(&fours, &mut self.fours, |i| Block::of(block(i)));
+        on(eights.len()).map_into(&eights, &mut self.eights, |i| Block::of(block(i)));
     }
 
     /// The children of node `index`, or `None` for a leaf.
@@ -287,7 +294,7 @@ impl LightTree {
     /// Recomputes the node groups from the nodes (after a build or refit),
     /// on `pool`.
     pub(crate) fn fill_groups(&mut self, pool: Pool) {
-        self.groups = NodeGroups::new_on(&self.nodes, pool);
+        self.groups.refill(&self.nodes, pool);
     }
 }
 

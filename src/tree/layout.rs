@@ -5,6 +5,7 @@ use core::ops::Range;
 
 use glam::{DVec3, Vec3};
 
+use super::build::TreeBuilder;
 use super::groups::NodeGroups;
 use crate::PointLight;
 use crate::geometry::{Aabb, Cone};
@@ -204,6 +205,8 @@ pub struct LightTree {
     pub(crate) node_planes: Vec<u32>,
     /// Every node's children side by side, for bounding them together.
     pub(crate) groups: NodeGroups,
+    /// The options it was built with, for [`rebuild`](Self::rebuild).
+    pub(crate) options: TreeBuilder,
 }
 
 /// A node whose lights are not known to lie in one plane.

@@ -87,21 +87,27 @@ const MAX_PASSES: usize = 5;
 /// sizes). Each bucket is then sorted on its own, in cache, by
 /// [`sort_run`]. The scatter is stable and so is each bucket's sort.
 pub(crate) fn sort(codes: &[u64]) -> (Vec<u32>, Vec<u64>) {
-    sort_on(codes, Pool::ONE)
+    let mut order = Vec::new();
+    let keys = sort_into(codes, Pool::ONE, &mut order);
+    (order, keys)
 }
 
-/// [`sort`], the buckets sorted on `pool` (the same result).
-pub(crate) fn sort_on(codes: &[u64], pool: Pool) -> (Vec<u32>, Vec<u64>) {
+/// [`sort`], the buckets sorted on `pool` (the same result), the indices
+/// written into `order` (its previous contents dropped, its memory
+/// reused): returns the sorted codes.
+pub(crate) fn sort_into(codes: &[u64], pool: Pool, order: &mut Vec<u32>) -> Vec<u64> {
     let n = codes.len();
+    order.clear();
     let varying = varying_bits(codes);
     if varying == 0 {
-        return ((0..n as u32).collect(), codes.to_vec());
+        order.extend(0..n as u32);
+        return codes.to_vec();
     }
     if n <= INSERTION_MAX {
         let mut keys = codes.to_vec();
-        let mut order = (0..n as u32).collect::<Vec<_>>();
-        insertion_sort(&mut keys, &mut order);
-        return (order, keys);
+        order.extend(0..n as u32);
+        insertion_sort(&mut keys, order);
+        return keys;
     }
     let digit = Digit::highest(varying, TOP_BITS.min(n.ilog2() + 1));
     let mut ends = vec![0u32; digit.buckets()];
@@ -110,13 +116,13 @@ pub(crate) fn sort_on(codes: &[u64], pool: Pool) -> (Vec<u32>, Vec<u64>) {
     }
     counts_to_starts(&mut ends);
     let mut keys = vec![0u64; n];
-    let mut order = vec![0u32; n];
+    order.resize(n, 0);
     scatter(
         codes.iter().copied().zip(0u32..),
         digit,
         &mut ends,
         &mut keys,
-        &mut order,
+        order,
     );
 
     let mut largest = 0;
@@ -148,7 +154,7 @@ pub(crate) fn sort_on(codes: &[u64], pool: Pool) -> (Vec<u32>, Vec<u64>) {
         },
         |scratch, (keys, order)| sort_run(keys, order, scratch),
     );
-    (order, keys)
+    keys
 }
 
 /// Buffers for sorting one run: keys and indices at least as long as the

@@ -78,6 +78,24 @@ impl Pool {
         1
     }
 
+    /// [`map`](Self::map) into `out`, whose previous contents are dropped
+    /// and whose memory is reused.
+    pub(crate) fn map_into<T: Sync, U: Send>(
+        self,
+        items: &[T],
+        out: &mut Vec<U>,
+        f: impl Fn(&T) -> U + Sync + Send,
+    ) {
+        #[cfg(feature = "rayon")]
+        if self.parallel {
+            use rayon::prelude::*;
+            items.par_iter().map(f).collect_into_vec(out);
+            return;
+        }
+        out.clear();
+        out.extend(items.iter().map(f));
+    }
+
     /// `items.map(f)`, in order.
     pub(crate) fn map<T: Sync, U: Send>(
         self,
