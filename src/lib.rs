@@ -160,7 +160,8 @@
 //!
 //! * `rayon` (off by default): work spread over rayon's thread pool, with
 //!   the same results as on one thread: `Shading::shade_batch_parallel`,
-//!   `LightTree::build_parallel`, `TreeBuilder::build_parallel` and
+//!   `LightTree::build_parallel`, `TreeBuilder::build_parallel`,
+//!   `LightTree::rebuild_parallel`, `TreeBuilder::rebuild_parallel` and
 //!   `LightTree::refit_parallel`.
 //!
 //! Without it the crate depends only on `glam`, `smallvec` and `thiserror`.
