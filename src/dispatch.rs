@@ -3,7 +3,8 @@
 //! `x86_64` processors with AVX2 (or AVX-512F, for the batch call's sums),
 //! copies compiled for them (wider vectors, three-operand instructions),
 //! picked at run time, so that a default build gets them. The build's statistics have a copy for AVX2
-//! with FMA.
+//! with FMA, its Morton codes one for AVX2 (four lights' integer and
+//! conversion operations side by side).
 //! Rust never fuses a multiply and an add on its own; where the code asks
 //! for a fused one (`f64::mul_add`, in the build's moments) it is rounded
 //! once in every copy (an instruction where the processor has FMA, the

@@ -279,7 +279,7 @@ impl TreeBuilder {
         // pass over a node's lights reads memory in sequence.
         let cheap = pool.cheap(n);
         let grid = morton::Grid::over(scene);
-        let codes = cheap.map(lights, |l| grid.code(l.position));
+        let codes = grid.codes_of(lights, cheap);
         // Median splits reorder lights within a run of equal codes only, so
         // the sorted codes stay valid for every run.
         let codes = morton::sort_into(&codes, cheap, &mut tree.order);

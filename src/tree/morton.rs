@@ -37,7 +37,7 @@ impl Grid {
     }
 
     /// The Morton code of the cell holding `p`.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn code(&self, p: Vec3) -> u64 {
         let top = f64::from(1u32 << BITS_PER_AXIS) - 1.0;
         let q = ((p.as_dvec3() - self.min) * self.scale).clamp(DVec3::ZERO, DVec3::splat(top));
@@ -45,7 +45,59 @@ impl Grid {
     }
 }
 
+/// Lights per part of [`Grid::codes_of`] on a pool.
+const CODE_PART: usize = 1 << 14;
+
+impl Grid {
+    /// The codes of `lights`' positions, in order, on `pool`: the same
+    /// values as [`code`](Self::code), in a copy compiled for AVX2 where
+    /// the processor has it (integer and conversion operations only, so the
+    /// same bits).
+    pub(crate) fn codes_of(&self, lights: &[crate::PointLight], pool: Pool) -> Vec<u64> {
+        let mut out = vec![0u64; lights.len()];
+        let parts: Vec<_> = lights
+            .chunks(CODE_PART)
+            .zip(out.chunks_mut(CODE_PART))
+            .collect();
+        pool.for_each_with(
+            parts,
+            || (),
+            |(), (lights, out)| self.fill_codes(lights, out),
+        );
+        out
+    }
+
+    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
+    // `dispatch`).
+    #[allow(unsafe_code)]
+    fn fill_codes(&self, lights: &[crate::PointLight], out: &mut [u64]) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::dispatch::avx2() {
+                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+                unsafe { self.fill_codes_avx2(lights, out) };
+                return;
+            }
+        }
+        self.fill_codes_body(lights, out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn fill_codes_avx2(&self, lights: &[crate::PointLight], out: &mut [u64]) {
+        self.fill_codes_body(lights, out);
+    }
+
+    #[inline(always)]
+    fn fill_codes_body(&self, lights: &[crate::PointLight], out: &mut [u64]) {
+        for (l, o) in lights.iter().zip(out) {
+            *o = self.code(l.position);
+        }
+    }
+}
+
 /// The 21 low bits of `v`, two zero bits inserted after each.
+#[inline(always)]
 fn spread(v: u32) -> u64 {
     let mut x = u64::from(v) & 0x1f_ffff;
     x = (x | x << 32) & 0x1f_0000_0000_ffff;
