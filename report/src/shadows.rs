@@ -631,13 +631,15 @@ fn lanes(left: usize) -> u32 {
 struct Candidates {
     /// The apex the lists belong to.
     apex: Option<Vec3>,
-    /// The lists' occluder slots, back to back, each list padded with
-    /// [`PAD`] to a multiple of four; the end is scratch for the list being
-    /// gathered.
+    /// The lists' occluder slots, back to back up to `end`, each list padded
+    /// with [`PAD`] to a multiple of four; the rest is room for the list
+    /// being gathered (the vector only grows: no slot is written twice
+    /// for its length's sake).
     slots: Vec<u32>,
     /// The boxes of `slots`, four to a quad: those of `slots[4 k..4 k + 4]`
-    /// are `quads[k]`.
+    /// are `quads[k]` (as long as `slots` over four).
     quads: Vec<Quad>,
+    end: usize,
     lists: Vec<List>,
     /// The first list under no other, and the last one kept.
     root: u32,
@@ -654,6 +656,7 @@ impl Default for Candidates {
             apex: None,
             slots: Vec::new(),
             quads: Vec::new(),
+            end: 0,
             lists: Vec::new(),
             root: NO_LIST,
             last: NO_LIST,
@@ -689,8 +692,7 @@ impl Candidates {
                 self.quads.reserve(RESERVED_SLOTS / 4);
                 self.lists.reserve(RESERVED_LISTS);
             }
-            self.slots.clear();
-            self.quads.clear();
+            self.end = 0;
             self.lists.clear();
             self.root = NO_LIST;
             self.last = NO_LIST;
@@ -764,8 +766,18 @@ impl Candidates {
 
     /// Drops every slot from `start` (a multiple of four) on.
     fn truncate(&mut self, start: usize) {
-        self.slots.truncate(start);
-        self.quads.truncate(start / 4);
+        self.end = start;
+    }
+
+    /// Makes room for `len` slots from `start` (a multiple of four), and
+    /// three more.
+    #[inline]
+    fn room(&mut self, start: usize, len: usize) {
+        let end = start + 4 * (len + 3).div_ceil(4);
+        if self.slots.len() < end {
+            self.slots.resize(end, PAD);
+            self.quads.resize(end / 4, Quad::UNUSED);
+        }
     }
 
     /// Gathers the boxes that may meet `shaft` at the end of `slots`, with
@@ -782,7 +794,7 @@ impl Candidates {
         small: bool,
     ) -> Option<Range<usize>> {
         self.small_shafts += u32::from(small);
-        let start = self.slots.len();
+        let start = self.end;
         debug_assert_eq!(start % 4, 0, "lists start at a quad");
         let mut count = 0;
         if let Some(range) = self.range(parent) {
@@ -793,8 +805,7 @@ impl Candidates {
             // place, which moves on past the boxes that meet the shaft only:
             // no branch on the data (a loop over the lanes that meet it was
             // mispredicted often). Room for all of them first.
-            self.slots.resize(start + 4 * parent_quads, PAD);
-            self.quads.resize(start / 4 + parent_quads, Quad::UNUSED);
+            self.room(start, range.len());
             for k in 0..parent_quads {
                 let quad = self.quads[first + k];
                 let mask = test.meets(&quad) & lanes(range.len() - 4 * k);
@@ -805,15 +816,9 @@ impl Candidates {
                     count += (mask >> lane) as usize & 1;
                 }
             }
-            // Drop the room left over; the lanes after the last box of its
-            // quad are never read (every scan masks them).
-            let end = start + 4 * count.div_ceil(4);
-            self.slots.truncate(end);
-            self.slots[start + count..].fill(PAD);
-            self.quads.truncate(end / 4);
         } else {
-            let mut out = Quad::UNUSED;
-            let (slots, quads) = (&mut self.slots, &mut self.quads);
+            self.room(start, CANDIDATES_MAX);
+            let (slots, quads) = (&mut self.slots[start..], &mut self.quads[start / 4..]);
             let overflow = occluders.any_slot_in(
                 |b| shaft.meets(b),
                 |slot, b| {
@@ -823,25 +828,23 @@ impl Candidates {
                     if count == CANDIDATES_MAX {
                         return true;
                     }
-                    slots.push(slot as u32);
-                    out.set(count % 4, b);
+                    slots[count] = slot as u32;
+                    quads[count / 4].set(count % 4, b);
                     count += 1;
-                    if count % 4 == 0 {
-                        quads.push(out);
-                    }
                     false
                 },
             );
             if overflow {
                 self.small_crowded += u32::from(small);
-                self.truncate(start);
                 return None;
             }
-            if count % 4 != 0 {
-                self.quads.push(out);
-                self.slots.resize(start + 4 * count.div_ceil(4), PAD);
-            }
         }
+        // The list ends at a whole quad; the lanes after its last box are
+        // never read (every scan masks them) and their slots are padding.
+        self.end = start + 4 * count.div_ceil(4);
+        // (Three slots padded whatever the count, with room for them: a
+        // loop to the end of the quad was mispredicted often.)
+        self.slots[start + count..start + count + 3].fill(PAD);
         let crowded = count > RAY_LIST_MAX as usize;
         self.small_crowded += u32::from(small && crowded);
         Some(start..start + count)
