@@ -277,7 +277,7 @@ impl<'o> Shadows<'o> {
             // `EARLY_BLOCKER_LIST`).
             return self.answer(Coverage::Occluded);
         }
-        let shaft = Shaft::new(apex, target, MARGIN);
+        let shaft = PointShaft::new(apex, target, MARGIN);
         let Some(gathered) = self.lists.gather(self.occluders, parent, &shaft, small) else {
             // Too many boxes meet the shaft: not visible.
             let (occluded, _) = self.single_blocker(apex, &[apex], target);
@@ -790,7 +790,7 @@ impl Candidates {
         &mut self,
         occluders: &Occluders,
         parent: u32,
-        shaft: &Shaft,
+        shaft: &PointShaft,
         small: bool,
     ) -> Option<Range<usize>> {
         self.small_shafts += u32::from(small);
@@ -818,6 +818,7 @@ impl Candidates {
             }
         } else {
             self.room(start, CANDIDATES_MAX);
+            let shaft = shaft.planes();
             let (slots, quads) = (&mut self.slots[start..], &mut self.quads[start / 4..]);
             let overflow = occluders.any_slot_in(
                 |b| shaft.meets(b),
@@ -910,7 +911,7 @@ impl Candidates {
     }
 }
 
-/// A shaft from a point ([`Shaft::new`]) set up for [`Quad`]s: its bounding
+/// A shaft from a point ([`PointShaft`]) set up for [`Quad`]s: its bounding
 /// box and its planes `[n_i, n_j, offset]` (axes of [`PAIR_AXES`]), each
 /// number in every lane.
 struct QuadShaft {
@@ -921,10 +922,10 @@ struct QuadShaft {
 
 impl QuadShaft {
     #[inline]
-    fn new(shaft: &Shaft) -> QuadShaft {
+    fn new(shaft: &PointShaft) -> QuadShaft {
         QuadShaft {
-            min: [0, 1, 2].map(|axis| Vec4::splat(shaft.min[axis])),
-            max: [0, 1, 2].map(|axis| Vec4::splat(shaft.max[axis])),
+            min: [shaft.min.x, shaft.min.y, shaft.min.z].map(Vec4::splat),
+            max: [shaft.max.x, shaft.max.y, shaft.max.z].map(Vec4::splat),
             planes: shaft.pairs.map(|plane| plane.map(Vec4::splat)),
         }
     }
@@ -973,11 +974,48 @@ pub struct Shaft {
     max: Vec3A,
     normal: [[Vec4; PLANE_LANES / 4]; 3],
     offset: [Vec4; PLANE_LANES / 4],
-    /// The planes of a shaft from a point ([`Shaft::new`]) again, each as
-    /// `[n_i, n_j, offset]` with the axes `(i, j)` of [`PAIR_AXES`] (two
-    /// planes per projection), for [`Shaft::meets_quad`]; every plane holds
-    /// every point in a shaft between boxes.
+}
+
+/// A shaft from a point to a box ([`Shaft::new`]) as it is first found: its
+/// bounding box and its planes, each as `[n_i, n_j, offset]` with the axes
+/// `(i, j)` of [`PAIR_AXES`] (two planes per projection). A child's shaft
+/// filters its parent's list in this form ([`QuadShaft`]); only a shaft
+/// tested against the BVH's nodes is set out as a [`Shaft`].
+struct PointShaft {
+    min: Vec3A,
+    max: Vec3A,
     pairs: [[f32; 3]; 6],
+}
+
+impl PointShaft {
+    /// The shaft from `apex` to `target`, every face pushed out by `margin`
+    /// (see [`Shaft::new`]).
+    #[inline]
+    fn new(apex: Vec3, target: &Aabb, margin: f32) -> PointShaft {
+        let (p, lo, hi) = (apex, target.min, target.max);
+        // The projections along z (axes x, y), x (y, z) and y (z, x), two
+        // planes each.
+        let along_z = silhouette([p.x, p.y], [lo.x, lo.y], [hi.x, hi.y], margin);
+        let along_x = silhouette([p.y, p.z], [lo.y, lo.z], [hi.y, hi.z], margin);
+        let along_y = silhouette([p.z, p.x], [lo.z, lo.x], [hi.z, hi.x], margin);
+        PointShaft {
+            min: Vec3A::from(lo.min(p)) - margin,
+            max: Vec3A::from(hi.max(p)) + margin,
+            pairs: [
+                along_z[0], along_z[1], along_x[0], along_x[1], along_y[0], along_y[1],
+            ],
+        }
+    }
+
+    /// The same shaft set out as a [`Shaft`].
+    fn planes(&self) -> Shaft {
+        let mut shaft = Shaft::boxed(self.min, self.max);
+        for (k, &[a, b, offset]) in self.pairs.iter().enumerate() {
+            let (i, j) = PAIR_AXES[k / 2];
+            shaft.set_plane(k, (i, a), (j, b), offset);
+        }
+        shaft
+    }
 }
 
 /// The axes `(i, j)` of the planes `2 k` and `2 k + 1` of a shaft from a
@@ -993,7 +1031,6 @@ impl Shaft {
             max,
             normal: [[Vec4::ZERO; PLANE_LANES / 4]; 3],
             offset: [Vec4::INFINITY; PLANE_LANES / 4],
-            pairs: [[0.0, 0.0, f32::INFINITY]; 6],
         }
     }
 
@@ -1015,28 +1052,7 @@ impl Shaft {
     /// (so that a box grown by `margin` on every side meets the grown shaft
     /// whenever it meets the shaft).
     pub fn new(apex: Vec3, target: &Aabb, margin: f32) -> Shaft {
-        let (p, lo, hi) = (apex, target.min, target.max);
-        let mut shaft = Shaft::boxed(
-            Vec3A::from(lo.min(p)) - margin,
-            Vec3A::from(hi.max(p)) + margin,
-        );
-        // The projections along z (axes x, y), x (y, z) and y (z, x), two
-        // planes each.
-        let along_z = silhouette([p.x, p.y], [lo.x, lo.y], [hi.x, hi.y], margin);
-        let along_x = silhouette([p.y, p.z], [lo.y, lo.z], [hi.y, hi.z], margin);
-        let along_y = silhouette([p.z, p.x], [lo.z, lo.x], [hi.z, hi.x], margin);
-        for m in 0..2 {
-            let [a, b, offset] = along_z[m];
-            shaft.set_plane(m, (0, a), (1, b), offset);
-            let [a, b, offset] = along_x[m];
-            shaft.set_plane(2 + m, (1, a), (2, b), offset);
-            let [a, b, offset] = along_y[m];
-            shaft.set_plane(4 + m, (2, a), (0, b), offset);
-        }
-        shaft.pairs = [
-            along_z[0], along_z[1], along_x[0], along_x[1], along_y[0], along_y[1],
-        ];
-        shaft
+        PointShaft::new(apex, target, margin).planes()
     }
 
     /// The shaft between the boxes `a` and `b`, every face pushed out by
@@ -1144,16 +1160,18 @@ fn silhouette(q: [f32; 2], lo: [f32; 2], hi: [f32; 2], margin: f32) -> [[f32; 3]
             (n_i, n_j) = (-n_i, -n_j);
         }
         let dot = |x: f32, y: f32| n_i * x + n_j * y;
+        // The rectangle's largest value is at the corner that takes, per
+        // axis, the maximum where the normal's component is positive, else
+        // the minimum: rounding is monotone, so that corner's computed dot
+        // product is the largest of the four computed ones too.
+        let support = dot(
+            if n_i > 0.0 { hi[0] } else { lo[0] },
+            if n_j > 0.0 { hi[1] } else { lo[1] },
+        );
         // Finite values: the larger by one comparison (`f32::max` also
         // orders NaNs).
-        let larger = |a: f32, b: f32| if a > b { a } else { b };
-        let reach = larger(
-            larger(dot(q[0], q[1]), dot(lo[0], lo[1])),
-            larger(
-                larger(dot(hi[0], lo[1]), dot(lo[0], hi[1])),
-                dot(hi[0], hi[1]),
-            ),
-        );
+        let q_dot = dot(q[0], q[1]);
+        let reach = if q_dot > support { q_dot } else { support };
         [n_i, n_j, reach + margin * (n_i.abs() + n_j.abs())]
     };
     [line(corners[0]), line(corners[1])]
@@ -1172,11 +1190,15 @@ impl Rays {
     #[inline]
     fn new(from: Vec3, ends: &[Vec3]) -> Rays {
         let end = |k: usize| ends[k.min(ends.len() - 1)];
-        let axis =
-            |a: usize| Vec4::new(end(0)[a], end(1)[a], end(2)[a], end(3)[a]) - Vec4::splat(from[a]);
+        let [a, b, c, d] = [end(0), end(1), end(2), end(3)];
+        // Written out axis by axis: an array's `map` over the axes was not
+        // unrolled, and indexing a `Vec3` by a variable branches.
+        let x = Vec4::new(a.x, b.x, c.x, d.x) - Vec4::splat(from.x);
+        let y = Vec4::new(a.y, b.y, c.y, d.y) - Vec4::splat(from.y);
+        let z = Vec4::new(a.z, b.z, c.z, d.z) - Vec4::splat(from.z);
         Rays {
             from: from.into(),
-            inv_dir: [0, 1, 2].map(|a| Vec4::ONE / axis(a)),
+            inv_dir: [Vec4::ONE / x, Vec4::ONE / y, Vec4::ONE / z],
         }
     }
 
