@@ -993,16 +993,24 @@ impl PointShaft {
     #[inline]
     fn new(apex: Vec3, target: &Aabb, margin: f32) -> PointShaft {
         let (p, lo, hi) = (apex, target.min, target.max);
-        // The projections along z (axes x, y), x (y, z) and y (z, x), two
-        // planes each.
-        let along_z = silhouette([p.x, p.y], [lo.x, lo.y], [hi.x, hi.y], margin);
-        let along_x = silhouette([p.y, p.z], [lo.y, lo.z], [hi.y, hi.z], margin);
-        let along_y = silhouette([p.z, p.x], [lo.z, lo.x], [hi.z, hi.x], margin);
+        // The projections along z (axes x, y), x (y, z) and y (z, x), one a
+        // lane, two planes each.
+        let lanes = |v: Vec3| [Vec4::new(v.x, v.y, v.z, 0.0), Vec4::new(v.y, v.z, v.x, 0.0)];
+        let lines = silhouettes(lanes(p), lanes(lo), lanes(hi), margin);
+        let plane = |m: usize, k: usize| {
+            let [n_i, n_j, offset] = lines[m].map(|v| v.to_array()[k]);
+            [n_i, n_j, offset]
+        };
         PointShaft {
             min: Vec3A::from(lo.min(p)) - margin,
             max: Vec3A::from(hi.max(p)) + margin,
             pairs: [
-                along_z[0], along_z[1], along_x[0], along_x[1], along_y[0], along_y[1],
+                plane(0, 0),
+                plane(1, 0),
+                plane(0, 1),
+                plane(1, 1),
+                plane(0, 2),
+                plane(1, 2),
             ],
         }
     }
@@ -1122,9 +1130,11 @@ impl Shaft {
 }
 
 /// The lines through the point `q` and the silhouette corners of the
-/// rectangle `[lo, hi]`, in one projection along an axis: as `[n_i, n_j,
-/// offset]`, the rectangle and `q` in `n . x <= offset`, pushed out by
-/// `margin` in the 1-norm of `n` (the dot product's rounding scales alike).
+/// rectangle `[lo, hi]`, in each projection along an axis (lane `k` of
+/// each vector holds the projection's axes `(i, j)` of [`PAIR_AXES`]; lane
+/// 3 is unused): as `[n_i, n_j, offset]`, the rectangle and `q` in
+/// `n . x <= offset`, pushed out by `margin` in the 1-norm of `n` (the dot
+/// product's rounding scales alike).
 /// A silhouette corner lies between a side of the rectangle turned towards
 /// `q` (`q` strictly beyond it) and one turned away: with `q` beyond one
 /// pair of sides, the two corners of the near side; beyond both, the two
@@ -1134,47 +1144,59 @@ impl Shaft {
 /// the normal's rounding. A missing line (`q` inside the rectangle's
 /// extent on both axes, or on a corner) is `[0, 0, inf]`, which holds
 /// every point.
+///
+/// Returned as the two lines' `(n_i, n_j, offset)`, lane by lane: every
+/// lane does the operations of one projection's line in the same order,
+/// without a branch (the cases picked by comparisons were mispredicted
+/// often).
 #[inline(always)]
-fn silhouette(q: [f32; 2], lo: [f32; 2], hi: [f32; 2], margin: f32) -> [[f32; 3]; 2] {
-    const NONE: [f32; 3] = [0.0, 0.0, f32::INFINITY];
-    let below = [q[0] < lo[0], q[1] < lo[1]];
-    let beyond = [below[0] || q[0] > hi[0], below[1] || q[1] > hi[1]];
-    let near = |k: usize| if below[k] { lo[k] } else { hi[k] };
-    let far = |k: usize| if below[k] { hi[k] } else { lo[k] };
-    let corners = match beyond {
-        [false, false] => return [NONE; 2],
-        [true, false] => [[near(0), lo[1]], [near(0), hi[1]]],
-        [false, true] => [[lo[0], near(1)], [hi[0], near(1)]],
-        [true, true] => [[near(0), far(1)], [far(0), near(1)]],
-    };
+fn silhouettes(q: [Vec4; 2], lo: [Vec4; 2], hi: [Vec4; 2], margin: f32) -> [[Vec4; 3]; 2] {
+    let below = [q[0].cmplt(lo[0]), q[1].cmplt(lo[1])];
+    let beyond = [below[0] | q[0].cmpgt(hi[0]), below[1] | q[1].cmpgt(hi[1])];
+    let near = |k: usize| Vec4::select(below[k], lo[k], hi[k]);
+    let far = |k: usize| Vec4::select(below[k], hi[k], lo[k]);
+    // Beyond one pair of sides, the two corners of the near side; beyond
+    // both, the two corners off the diagonal through the nearest corner.
+    let corners = [
+        [
+            Vec4::select(beyond[0], near(0), lo[0]),
+            Vec4::select(beyond[1], Vec4::select(beyond[0], far(1), near(1)), lo[1]),
+        ],
+        [
+            Vec4::select(beyond[0], Vec4::select(beyond[1], far(0), near(0)), hi[0]),
+            Vec4::select(beyond[1], near(1), hi[1]),
+        ],
+    ];
     let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
-    let line = |c: [f32; 2]| {
+    let some = beyond[0] | beyond[1];
+    corners.map(|c| {
         // A normal of the line through q and c (of any length: the
         // half-plane, its margin and the box test scale alike).
-        let (mut n_i, mut n_j) = (c[1] - q[1], q[0] - c[0]);
-        if n_i == 0.0 && n_j == 0.0 {
-            return NONE; // q on the corner: no line through both
-        }
-        if n_i * (centre[0] - q[0]) + n_j * (centre[1] - q[1]) > 0.0 {
-            // The rectangle's side is the inside.
-            (n_i, n_j) = (-n_i, -n_j);
-        }
-        let dot = |x: f32, y: f32| n_i * x + n_j * y;
+        let (n_i, n_j) = (c[1] - q[1], q[0] - c[0]);
+        // No line where q is inside the rectangle's extent on both axes or
+        // on the corner.
+        let line = some & !(n_i.cmpeq(Vec4::ZERO) & n_j.cmpeq(Vec4::ZERO));
+        // The rectangle's side is the inside.
+        let flip = (n_i * (centre[0] - q[0]) + n_j * (centre[1] - q[1])).cmpgt(Vec4::ZERO);
+        let (n_i, n_j) = (Vec4::select(flip, -n_i, n_i), Vec4::select(flip, -n_j, n_j));
+        let dot = |x: Vec4, y: Vec4| n_i * x + n_j * y;
         // The rectangle's largest value is at the corner that takes, per
         // axis, the maximum where the normal's component is positive, else
         // the minimum: rounding is monotone, so that corner's computed dot
         // product is the largest of the four computed ones too.
         let support = dot(
-            if n_i > 0.0 { hi[0] } else { lo[0] },
-            if n_j > 0.0 { hi[1] } else { lo[1] },
+            Vec4::select(n_i.cmpgt(Vec4::ZERO), hi[0], lo[0]),
+            Vec4::select(n_j.cmpgt(Vec4::ZERO), hi[1], lo[1]),
         );
-        // Finite values: the larger by one comparison (`f32::max` also
-        // orders NaNs).
         let q_dot = dot(q[0], q[1]);
-        let reach = if q_dot > support { q_dot } else { support };
-        [n_i, n_j, reach + margin * (n_i.abs() + n_j.abs())]
-    };
-    [line(corners[0]), line(corners[1])]
+        let reach = Vec4::select(q_dot.cmpgt(support), q_dot, support);
+        let offset = reach + margin * (n_i.abs() + n_j.abs());
+        [
+            Vec4::select(line, n_i, Vec4::ZERO),
+            Vec4::select(line, n_j, Vec4::ZERO),
+            Vec4::select(line, offset, Vec4::INFINITY),
+        ]
+    })
 }
 
 /// Up to four segments from one point, set up for slab tests four at a time:
@@ -1324,6 +1346,46 @@ mod tests {
         // Beside the segments, inside the bounding box: outside the shaft.
         let aside = BvhAabb::new(Vec3A::new(9.0, 0.0, 0.0), Vec3A::new(9.5, 0.5, 0.5));
         assert!(!shaft.meets(&aside));
+    }
+
+    /// Every point of segments from a point to a box lies in their shaft,
+    /// wherever the point is (beyond one, two or three pairs of the box's
+    /// sides, inside its extent along some axes, on a corner or an edge's
+    /// line), and boxes that lie beside the segments are culled.
+    #[test]
+    fn the_shaft_from_a_point_holds_every_segment_to_the_box() {
+        let target = Aabb {
+            min: Vec3::new(2.0, -1.0, 4.0),
+            max: Vec3::new(3.0, 1.5, 4.5),
+        };
+        let reach = [-3.0, 2.0, 2.5, 3.0, 8.0];
+        let mut culled = 0;
+        for x in reach {
+            for y in reach.map(|v| v - 1.0) {
+                for z in reach.map(|v| v + 2.0) {
+                    let apex = Vec3::new(x, y, z);
+                    let shaft = Shaft::new(apex, &target, 0.0);
+                    for q in corners(&target) {
+                        for k in 0..=8 {
+                            let at = apex + (q - apex) * (k as f32 / 8.0);
+                            let tiny = BvhAabb::new((at - 1e-4).into(), (at + 1e-4).into());
+                            assert!(shaft.meets(&tiny), "{at} outside the shaft from {apex}");
+                        }
+                    }
+                    // A small box halfway along the segment to the centre,
+                    // pushed off it sideways by more than the target's
+                    // size: outside the hull, and culled whenever a plane
+                    // separates it.
+                    let centre = 0.5 * (target.min + target.max);
+                    let middle = 0.5 * (apex + centre);
+                    let side = (centre - apex).normalize().any_orthonormal_vector() * 6.0;
+                    let aside = middle + side;
+                    let off = BvhAabb::new((aside - 0.1).into(), (aside + 0.1).into());
+                    culled += usize::from(!shaft.meets(&off));
+                }
+            }
+        }
+        assert!(culled > 0, "no box beside the segments culled");
     }
 
     /// A group's answer holds for sampled segments between the two boxes:
