@@ -166,15 +166,19 @@ pub const FRACTION_POINTS: [Vec3; 4] = [
 ///
 /// The listed boxes form a tree (each under the smallest listed box that
 /// held it when it was listed), so the smallest list holding a box is found
-/// by descending from the roots (from the last list kept, when it holds the
-/// box). A shadow ray moves the box that blocks it to the front of its
+/// by descending from the roots (from the nearest list that holds the box
+/// on the way up from the last list kept, when there is one). A shadow ray moves the box that blocks it to the front of its
 /// list, where the next light's ray tries it first. A list keeps its boxes
 /// four to a quad too (per axis the four minima, then the maxima), so that
 /// a child's shaft filters its parent's list, and the single-blocker test
 /// scans a list, four boxes at a time; and the lights of a leaf, which the
 /// cut asks about together ([`Visibility::visible_lights`]), are tested
 /// four segments at a time against each box of the leaf's list, with the
-/// single ray's operations in each lane. A
+/// single ray's operations in each lane. Where a branch on the data was
+/// mispredicted often the host does without one: a shaft's silhouette
+/// planes are found for the three projections at once, one a lane; a
+/// child's shaft filters its parent's list by copying every box to the next
+/// free place, which moves on past the boxes that meet the shaft only. A
 /// host whose small nodes' shafts keep meeting more boxes than a ray tests
 /// ([`GIVE_UP_CROWDED`]; foliage) stops gathering and classifies as above
 /// without lists.
