@@ -7,7 +7,7 @@
 
 use std::ops::Range;
 
-use glam::{BVec4A, Vec2, Vec3, Vec3A, Vec4};
+use glam::{BVec3A, BVec4A, Vec2, Vec3, Vec3A, Vec4};
 use manylights::{Aabb, Coverage, NodeRegion, PointGroup, Visibility};
 use obvhs::aabb::Aabb as BvhAabb;
 
@@ -166,15 +166,19 @@ pub const FRACTION_POINTS: [Vec3; 4] = [
 ///
 /// The listed boxes form a tree (each under the smallest listed box that
 /// held it when it was listed), so the smallest list holding a box is found
-/// by descending from the roots (from the last list kept, when it holds the
-/// box). A shadow ray moves the box that blocks it to the front of its
+/// by descending from the roots (from the nearest list that holds the box
+/// on the way up from the last list kept, when there is one). A shadow ray moves the box that blocks it to the front of its
 /// list, where the next light's ray tries it first. A list keeps its boxes
 /// four to a quad too (per axis the four minima, then the maxima), so that
 /// a child's shaft filters its parent's list, and the single-blocker test
 /// scans a list, four boxes at a time; and the lights of a leaf, which the
 /// cut asks about together ([`Visibility::visible_lights`]), are tested
 /// four segments at a time against each box of the leaf's list, with the
-/// single ray's operations in each lane. A
+/// single ray's operations in each lane. Where a branch on the data was
+/// mispredicted often the host does without one: a shaft's silhouette
+/// planes are found for the three projections at once, one a lane; a
+/// child's shaft filters its parent's list by copying every box to the next
+/// free place, which moves on past the boxes that meet the shaft only. A
 /// host whose small nodes' shafts keep meeting more boxes than a ray tests
 /// ([`GIVE_UP_CROWDED`]; foliage) stops gathering and classifies as above
 /// without lists.
@@ -277,7 +281,7 @@ impl<'o> Shadows<'o> {
             // `EARLY_BLOCKER_LIST`).
             return self.answer(Coverage::Occluded);
         }
-        let shaft = Shaft::new(apex, target, MARGIN);
+        let shaft = PointShaft::new(apex, target, MARGIN);
         let Some(gathered) = self.lists.gather(self.occluders, parent, &shaft, small) else {
             // Too many boxes meet the shaft: not visible.
             let (occluded, _) = self.single_blocker(apex, &[apex], target);
@@ -513,6 +517,13 @@ impl Visibility for Shadows<'_> {
     }
 }
 
+/// Listed boxes and lists a host makes room for when it keeps its first
+/// list (in the report's city a shading point keeps about 160 lists of
+/// 1,800 boxes in all, at most about 700 lists of 6,600 boxes): growing
+/// from nothing by copies cost 3% of the city's instructions.
+const RESERVED_SLOTS: usize = 2048;
+const RESERVED_LISTS: usize = 256;
+
 /// No list: the end of a chain of lists.
 const NO_LIST: u32 = u32::MAX;
 
@@ -528,8 +539,10 @@ struct List {
     target: Aabb,
     start: u32,
     len: u32,
-    /// The first list under this one (listed inside its box), and the next
-    /// list under the same parent.
+    /// The list this one is under (`NO_LIST` for a root), the first list
+    /// under this one (listed inside its box), and the next list under the
+    /// same parent.
+    parent: u32,
     child: u32,
     sibling: u32,
 }
@@ -622,13 +635,15 @@ fn lanes(left: usize) -> u32 {
 struct Candidates {
     /// The apex the lists belong to.
     apex: Option<Vec3>,
-    /// The lists' occluder slots, back to back, each list padded with
-    /// [`PAD`] to a multiple of four; the end is scratch for the list being
-    /// gathered.
+    /// The lists' occluder slots, back to back up to `end`, each list padded
+    /// with [`PAD`] to a multiple of four; the rest is room for the list
+    /// being gathered (the vector only grows: no slot is written twice
+    /// for its length's sake).
     slots: Vec<u32>,
     /// The boxes of `slots`, four to a quad: those of `slots[4 k..4 k + 4]`
-    /// are `quads[k]`.
+    /// are `quads[k]` (as long as `slots` over four).
     quads: Vec<Quad>,
+    end: usize,
     lists: Vec<List>,
     /// The first list under no other, and the last one kept.
     root: u32,
@@ -645,6 +660,7 @@ impl Default for Candidates {
             apex: None,
             slots: Vec::new(),
             quads: Vec::new(),
+            end: 0,
             lists: Vec::new(),
             root: NO_LIST,
             last: NO_LIST,
@@ -657,7 +673,10 @@ impl Default for Candidates {
 /// Whether the closed box `outer` holds the box `inner`.
 #[inline]
 fn holds(outer: &Aabb, inner: &Aabb) -> bool {
-    outer.min.cmple(inner.min).all() && inner.max.cmple(outer.max).all()
+    // One mask of both comparisons, tested once: the answer depends on the
+    // data, and a branch per comparison was mispredicted often.
+    let (o_min, o_max) = (Vec3A::from(outer.min), Vec3A::from(outer.max));
+    (o_min.cmple(Vec3A::from(inner.min)) & Vec3A::from(inner.max).cmple(o_max)).all()
 }
 
 impl Candidates {
@@ -670,8 +689,14 @@ impl Candidates {
     fn aim(&mut self, apex: Vec3) {
         if self.apex != Some(apex) {
             self.apex = Some(apex);
-            self.slots.clear();
-            self.quads.clear();
+            if self.lists.capacity() == 0 {
+                // Room for a typical shading point's lists from the start,
+                // rather than growing from nothing by copies.
+                self.slots.reserve(RESERVED_SLOTS);
+                self.quads.reserve(RESERVED_SLOTS / 4);
+                self.lists.reserve(RESERVED_LISTS);
+            }
+            self.end = 0;
             self.lists.clear();
             self.root = NO_LIST;
             self.last = NO_LIST;
@@ -689,28 +714,28 @@ impl Candidates {
     fn descend(&self, mut found: u32, mut at: u32, target: &Aabb) -> u32 {
         while at != NO_LIST {
             let list = &self.lists[at as usize];
-            if holds(&list.target, target) {
-                found = at;
-                at = list.child;
-            } else {
-                at = list.sibling;
-            }
+            let held = holds(&list.target, target);
+            found = if held { at } else { found };
+            at = if held { list.child } else { list.sibling };
         }
         found
     }
 
-    /// A list whose box holds `target`: the smallest under the last list
-    /// kept if that one holds it (the cut asks about a node's children
-    /// soon after the node answered partial), else [`find`](Self::find)'s.
-    /// Any list whose box holds the target holds every box that meets the
-    /// target's shaft, so either serves.
+    /// A list whose box holds `target`: the smallest under the nearest
+    /// list that holds it on the way up from the last list kept to its
+    /// root (the cut asks about a node's children soon after the node
+    /// answered partial, and about their siblings after their own lists),
+    /// else [`find`](Self::find)'s. Any list whose box holds the target
+    /// holds every box that meets the target's shaft, so either serves.
     fn find_near_last(&self, target: &Aabb) -> u32 {
-        match self.lists.get(self.last as usize) {
-            Some(last) if holds(&last.target, target) => {
-                self.descend(self.last, last.child, target)
+        let mut at = self.last;
+        while let Some(list) = self.lists.get(at as usize) {
+            if holds(&list.target, target) {
+                return self.descend(at, list.child, target);
             }
-            _ => self.find(target),
+            at = list.parent;
         }
+        self.find(target)
     }
 
     /// Where the boxes of list `index` lie in `slots`, `None` for
@@ -745,8 +770,18 @@ impl Candidates {
 
     /// Drops every slot from `start` (a multiple of four) on.
     fn truncate(&mut self, start: usize) {
-        self.slots.truncate(start);
-        self.quads.truncate(start / 4);
+        self.end = start;
+    }
+
+    /// Makes room for `len` slots from `start` (a multiple of four), and
+    /// three more.
+    #[inline]
+    fn room(&mut self, start: usize, len: usize) {
+        let end = start + 4 * (len + 3).div_ceil(4);
+        if self.slots.len() < end {
+            self.slots.resize(end, PAD);
+            self.quads.resize(end / 4, Quad::UNUSED);
+        }
     }
 
     /// Gathers the boxes that may meet `shaft` at the end of `slots`, with
@@ -759,34 +794,36 @@ impl Candidates {
         &mut self,
         occluders: &Occluders,
         parent: u32,
-        shaft: &Shaft,
+        shaft: &PointShaft,
         small: bool,
     ) -> Option<Range<usize>> {
         self.small_shafts += u32::from(small);
-        let start = self.slots.len();
+        let start = self.end;
         debug_assert_eq!(start % 4, 0, "lists start at a quad");
-        let mut out = Quad::UNUSED;
         let mut count = 0;
         if let Some(range) = self.range(parent) {
             let test = QuadShaft::new(shaft);
             let first = range.start / 4;
-            for k in 0..range.len().div_ceil(4) {
+            let parent_quads = range.len().div_ceil(4);
+            // Every lane of the parent's list is copied to the next free
+            // place, which moves on past the boxes that meet the shaft only:
+            // no branch on the data (a loop over the lanes that meet it was
+            // mispredicted often). Room for all of them first.
+            self.room(start, range.len());
+            for k in 0..parent_quads {
                 let quad = self.quads[first + k];
-                let mut mask = test.meets(&quad) & lanes(range.len() - 4 * k);
-                while mask != 0 {
-                    let lane = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    let slot = self.slots[range.start + 4 * k + lane];
-                    self.slots.push(slot);
-                    out.copy_lane(count % 4, &quad, lane);
-                    count += 1;
-                    if count % 4 == 0 {
-                        self.quads.push(out);
-                    }
+                let mask = test.meets(&quad) & lanes(range.len() - 4 * k);
+                for lane in 0..4 {
+                    let at = start + count;
+                    self.slots[at] = self.slots[range.start + 4 * k + lane];
+                    self.quads[at / 4].copy_lane(at % 4, &quad, lane);
+                    count += (mask >> lane) as usize & 1;
                 }
             }
         } else {
-            let (slots, quads) = (&mut self.slots, &mut self.quads);
+            self.room(start, CANDIDATES_MAX);
+            let shaft = shaft.planes();
+            let (slots, quads) = (&mut self.slots[start..], &mut self.quads[start / 4..]);
             let overflow = occluders.any_slot_in(
                 |b| shaft.meets(b),
                 |slot, b| {
@@ -796,25 +833,23 @@ impl Candidates {
                     if count == CANDIDATES_MAX {
                         return true;
                     }
-                    slots.push(slot as u32);
-                    out.set(count % 4, b);
+                    slots[count] = slot as u32;
+                    quads[count / 4].set(count % 4, b);
                     count += 1;
-                    if count % 4 == 0 {
-                        quads.push(out);
-                    }
                     false
                 },
             );
             if overflow {
                 self.small_crowded += u32::from(small);
-                self.truncate(start);
                 return None;
             }
         }
-        if count % 4 != 0 {
-            self.quads.push(out);
-            self.slots.resize(start + 4 * count.div_ceil(4), PAD);
-        }
+        // The list ends at a whole quad; the lanes after its last box are
+        // never read (every scan masks them) and their slots are padding.
+        self.end = start + 4 * count.div_ceil(4);
+        // (Three slots padded whatever the count, with room for them: a
+        // loop to the end of the quad was mispredicted often.)
+        self.slots[start + count..start + count + 3].fill(PAD);
         let crowded = count > RAY_LIST_MAX as usize;
         self.small_crowded += u32::from(small && crowded);
         Some(start..start + count)
@@ -833,6 +868,7 @@ impl Candidates {
             target: *target,
             start: gathered.start as u32,
             len: gathered.len() as u32,
+            parent,
             child: NO_LIST,
             sibling,
         });
@@ -849,8 +885,12 @@ impl Candidates {
             return None;
         }
         let list = self.lists.get(self.last as usize)?;
-        let inside = |p: &Vec3| list.target.min.cmple(*p).all() && p.cmple(list.target.max).all();
-        (list.len <= RAY_LIST_MAX && points.iter().all(inside)).then(|| self.range(self.last))?
+        let (min, max) = (Vec3A::from(list.target.min), Vec3A::from(list.target.max));
+        let inside = points.iter().fold(BVec3A::TRUE, |inside, &p| {
+            let p = Vec3A::from(p);
+            inside & min.cmple(p) & p.cmple(max)
+        });
+        (list.len <= RAY_LIST_MAX && inside.all()).then(|| self.range(self.last))?
     }
 
     /// Where the boxes of the smallest list of `apex` whose box holds
@@ -875,7 +915,7 @@ impl Candidates {
     }
 }
 
-/// A shaft from a point ([`Shaft::new`]) set up for [`Quad`]s: its bounding
+/// A shaft from a point ([`PointShaft`]) set up for [`Quad`]s: its bounding
 /// box and its planes `[n_i, n_j, offset]` (axes of [`PAIR_AXES`]), each
 /// number in every lane.
 struct QuadShaft {
@@ -886,10 +926,10 @@ struct QuadShaft {
 
 impl QuadShaft {
     #[inline]
-    fn new(shaft: &Shaft) -> QuadShaft {
+    fn new(shaft: &PointShaft) -> QuadShaft {
         QuadShaft {
-            min: [0, 1, 2].map(|axis| Vec4::splat(shaft.min[axis])),
-            max: [0, 1, 2].map(|axis| Vec4::splat(shaft.max[axis])),
+            min: [shaft.min.x, shaft.min.y, shaft.min.z].map(Vec4::splat),
+            max: [shaft.max.x, shaft.max.y, shaft.max.z].map(Vec4::splat),
             planes: shaft.pairs.map(|plane| plane.map(Vec4::splat)),
         }
     }
@@ -938,11 +978,56 @@ pub struct Shaft {
     max: Vec3A,
     normal: [[Vec4; PLANE_LANES / 4]; 3],
     offset: [Vec4; PLANE_LANES / 4],
-    /// The planes of a shaft from a point ([`Shaft::new`]) again, each as
-    /// `[n_i, n_j, offset]` with the axes `(i, j)` of [`PAIR_AXES`] (two
-    /// planes per projection), for [`Shaft::meets_quad`]; every plane holds
-    /// every point in a shaft between boxes.
+}
+
+/// A shaft from a point to a box ([`Shaft::new`]) as it is first found: its
+/// bounding box and its planes, each as `[n_i, n_j, offset]` with the axes
+/// `(i, j)` of [`PAIR_AXES`] (two planes per projection). A child's shaft
+/// filters its parent's list in this form ([`QuadShaft`]); only a shaft
+/// tested against the BVH's nodes is set out as a [`Shaft`].
+struct PointShaft {
+    min: Vec3A,
+    max: Vec3A,
     pairs: [[f32; 3]; 6],
+}
+
+impl PointShaft {
+    /// The shaft from `apex` to `target`, every face pushed out by `margin`
+    /// (see [`Shaft::new`]).
+    #[inline]
+    fn new(apex: Vec3, target: &Aabb, margin: f32) -> PointShaft {
+        let (p, lo, hi) = (apex, target.min, target.max);
+        // The projections along z (axes x, y), x (y, z) and y (z, x), one a
+        // lane, two planes each.
+        let lanes = |v: Vec3| [Vec4::new(v.x, v.y, v.z, 0.0), Vec4::new(v.y, v.z, v.x, 0.0)];
+        let lines = silhouettes(lanes(p), lanes(lo), lanes(hi), margin);
+        let plane = |m: usize, k: usize| {
+            let [n_i, n_j, offset] = lines[m].map(|v| v.to_array()[k]);
+            [n_i, n_j, offset]
+        };
+        PointShaft {
+            min: Vec3A::from(lo.min(p)) - margin,
+            max: Vec3A::from(hi.max(p)) + margin,
+            pairs: [
+                plane(0, 0),
+                plane(1, 0),
+                plane(0, 1),
+                plane(1, 1),
+                plane(0, 2),
+                plane(1, 2),
+            ],
+        }
+    }
+
+    /// The same shaft set out as a [`Shaft`].
+    fn planes(&self) -> Shaft {
+        let mut shaft = Shaft::boxed(self.min, self.max);
+        for (k, &[a, b, offset]) in self.pairs.iter().enumerate() {
+            let (i, j) = PAIR_AXES[k / 2];
+            shaft.set_plane(k, (i, a), (j, b), offset);
+        }
+        shaft
+    }
 }
 
 /// The axes `(i, j)` of the planes `2 k` and `2 k + 1` of a shaft from a
@@ -958,7 +1043,6 @@ impl Shaft {
             max,
             normal: [[Vec4::ZERO; PLANE_LANES / 4]; 3],
             offset: [Vec4::INFINITY; PLANE_LANES / 4],
-            pairs: [[0.0, 0.0, f32::INFINITY]; 6],
         }
     }
 
@@ -980,28 +1064,7 @@ impl Shaft {
     /// (so that a box grown by `margin` on every side meets the grown shaft
     /// whenever it meets the shaft).
     pub fn new(apex: Vec3, target: &Aabb, margin: f32) -> Shaft {
-        let (p, lo, hi) = (apex, target.min, target.max);
-        let mut shaft = Shaft::boxed(
-            Vec3A::from(lo.min(p)) - margin,
-            Vec3A::from(hi.max(p)) + margin,
-        );
-        // The projections along z (axes x, y), x (y, z) and y (z, x), two
-        // planes each.
-        let along_z = silhouette([p.x, p.y], [lo.x, lo.y], [hi.x, hi.y], margin);
-        let along_x = silhouette([p.y, p.z], [lo.y, lo.z], [hi.y, hi.z], margin);
-        let along_y = silhouette([p.z, p.x], [lo.z, lo.x], [hi.z, hi.x], margin);
-        for m in 0..2 {
-            let [a, b, offset] = along_z[m];
-            shaft.set_plane(m, (0, a), (1, b), offset);
-            let [a, b, offset] = along_x[m];
-            shaft.set_plane(2 + m, (1, a), (2, b), offset);
-            let [a, b, offset] = along_y[m];
-            shaft.set_plane(4 + m, (2, a), (0, b), offset);
-        }
-        shaft.pairs = [
-            along_z[0], along_z[1], along_x[0], along_x[1], along_y[0], along_y[1],
-        ];
-        shaft
+        PointShaft::new(apex, target, margin).planes()
     }
 
     /// The shaft between the boxes `a` and `b`, every face pushed out by
@@ -1071,9 +1134,11 @@ impl Shaft {
 }
 
 /// The lines through the point `q` and the silhouette corners of the
-/// rectangle `[lo, hi]`, in one projection along an axis: as `[n_i, n_j,
-/// offset]`, the rectangle and `q` in `n . x <= offset`, pushed out by
-/// `margin` in the 1-norm of `n` (the dot product's rounding scales alike).
+/// rectangle `[lo, hi]`, in each projection along an axis (lane `k` of
+/// each vector holds the projection's axes `(i, j)` of [`PAIR_AXES`]; lane
+/// 3 is unused): as `[n_i, n_j, offset]`, the rectangle and `q` in
+/// `n . x <= offset`, pushed out by `margin` in the 1-norm of `n` (the dot
+/// product's rounding scales alike).
 /// A silhouette corner lies between a side of the rectangle turned towards
 /// `q` (`q` strictly beyond it) and one turned away: with `q` beyond one
 /// pair of sides, the two corners of the near side; beyond both, the two
@@ -1083,45 +1148,59 @@ impl Shaft {
 /// the normal's rounding. A missing line (`q` inside the rectangle's
 /// extent on both axes, or on a corner) is `[0, 0, inf]`, which holds
 /// every point.
+///
+/// Returned as the two lines' `(n_i, n_j, offset)`, lane by lane: every
+/// lane does the operations of one projection's line in the same order,
+/// without a branch (the cases picked by comparisons were mispredicted
+/// often).
 #[inline(always)]
-fn silhouette(q: [f32; 2], lo: [f32; 2], hi: [f32; 2], margin: f32) -> [[f32; 3]; 2] {
-    const NONE: [f32; 3] = [0.0, 0.0, f32::INFINITY];
-    let below = [q[0] < lo[0], q[1] < lo[1]];
-    let beyond = [below[0] || q[0] > hi[0], below[1] || q[1] > hi[1]];
-    let near = |k: usize| if below[k] { lo[k] } else { hi[k] };
-    let far = |k: usize| if below[k] { hi[k] } else { lo[k] };
-    let corners = match beyond {
-        [false, false] => return [NONE; 2],
-        [true, false] => [[near(0), lo[1]], [near(0), hi[1]]],
-        [false, true] => [[lo[0], near(1)], [hi[0], near(1)]],
-        [true, true] => [[near(0), far(1)], [far(0), near(1)]],
-    };
+fn silhouettes(q: [Vec4; 2], lo: [Vec4; 2], hi: [Vec4; 2], margin: f32) -> [[Vec4; 3]; 2] {
+    let below = [q[0].cmplt(lo[0]), q[1].cmplt(lo[1])];
+    let beyond = [below[0] | q[0].cmpgt(hi[0]), below[1] | q[1].cmpgt(hi[1])];
+    let near = |k: usize| Vec4::select(below[k], lo[k], hi[k]);
+    let far = |k: usize| Vec4::select(below[k], hi[k], lo[k]);
+    // Beyond one pair of sides, the two corners of the near side; beyond
+    // both, the two corners off the diagonal through the nearest corner.
+    let corners = [
+        [
+            Vec4::select(beyond[0], near(0), lo[0]),
+            Vec4::select(beyond[1], Vec4::select(beyond[0], far(1), near(1)), lo[1]),
+        ],
+        [
+            Vec4::select(beyond[0], Vec4::select(beyond[1], far(0), near(0)), hi[0]),
+            Vec4::select(beyond[1], near(1), hi[1]),
+        ],
+    ];
     let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
-    let line = |c: [f32; 2]| {
+    let some = beyond[0] | beyond[1];
+    corners.map(|c| {
         // A normal of the line through q and c (of any length: the
         // half-plane, its margin and the box test scale alike).
-        let (mut n_i, mut n_j) = (c[1] - q[1], q[0] - c[0]);
-        if n_i == 0.0 && n_j == 0.0 {
-            return NONE; // q on the corner: no line through both
-        }
-        if n_i * (centre[0] - q[0]) + n_j * (centre[1] - q[1]) > 0.0 {
-            // The rectangle's side is the inside.
-            (n_i, n_j) = (-n_i, -n_j);
-        }
-        let dot = |x: f32, y: f32| n_i * x + n_j * y;
-        // Finite values: the larger by one comparison (`f32::max` also
-        // orders NaNs).
-        let larger = |a: f32, b: f32| if a > b { a } else { b };
-        let reach = larger(
-            larger(dot(q[0], q[1]), dot(lo[0], lo[1])),
-            larger(
-                larger(dot(hi[0], lo[1]), dot(lo[0], hi[1])),
-                dot(hi[0], hi[1]),
-            ),
+        let (n_i, n_j) = (c[1] - q[1], q[0] - c[0]);
+        // No line where q is inside the rectangle's extent on both axes or
+        // on the corner.
+        let line = some & !(n_i.cmpeq(Vec4::ZERO) & n_j.cmpeq(Vec4::ZERO));
+        // The rectangle's side is the inside.
+        let flip = (n_i * (centre[0] - q[0]) + n_j * (centre[1] - q[1])).cmpgt(Vec4::ZERO);
+        let (n_i, n_j) = (Vec4::select(flip, -n_i, n_i), Vec4::select(flip, -n_j, n_j));
+        let dot = |x: Vec4, y: Vec4| n_i * x + n_j * y;
+        // The rectangle's largest value is at the corner that takes, per
+        // axis, the maximum where the normal's component is positive, else
+        // the minimum: rounding is monotone, so that corner's computed dot
+        // product is the largest of the four computed ones too.
+        let support = dot(
+            Vec4::select(n_i.cmpgt(Vec4::ZERO), hi[0], lo[0]),
+            Vec4::select(n_j.cmpgt(Vec4::ZERO), hi[1], lo[1]),
         );
-        [n_i, n_j, reach + margin * (n_i.abs() + n_j.abs())]
-    };
-    [line(corners[0]), line(corners[1])]
+        let q_dot = dot(q[0], q[1]);
+        let reach = Vec4::select(q_dot.cmpgt(support), q_dot, support);
+        let offset = reach + margin * (n_i.abs() + n_j.abs());
+        [
+            Vec4::select(line, n_i, Vec4::ZERO),
+            Vec4::select(line, n_j, Vec4::ZERO),
+            Vec4::select(line, offset, Vec4::INFINITY),
+        ]
+    })
 }
 
 /// Up to four segments from one point, set up for slab tests four at a time:
@@ -1137,11 +1216,15 @@ impl Rays {
     #[inline]
     fn new(from: Vec3, ends: &[Vec3]) -> Rays {
         let end = |k: usize| ends[k.min(ends.len() - 1)];
-        let axis =
-            |a: usize| Vec4::new(end(0)[a], end(1)[a], end(2)[a], end(3)[a]) - Vec4::splat(from[a]);
+        let [a, b, c, d] = [end(0), end(1), end(2), end(3)];
+        // Written out axis by axis: an array's `map` over the axes was not
+        // unrolled, and indexing a `Vec3` by a variable branches.
+        let x = Vec4::new(a.x, b.x, c.x, d.x) - Vec4::splat(from.x);
+        let y = Vec4::new(a.y, b.y, c.y, d.y) - Vec4::splat(from.y);
+        let z = Vec4::new(a.z, b.z, c.z, d.z) - Vec4::splat(from.z);
         Rays {
             from: from.into(),
-            inv_dir: [0, 1, 2].map(|a| Vec4::ONE / axis(a)),
+            inv_dir: [Vec4::ONE / x, Vec4::ONE / y, Vec4::ONE / z],
         }
     }
 
@@ -1267,6 +1350,46 @@ mod tests {
         // Beside the segments, inside the bounding box: outside the shaft.
         let aside = BvhAabb::new(Vec3A::new(9.0, 0.0, 0.0), Vec3A::new(9.5, 0.5, 0.5));
         assert!(!shaft.meets(&aside));
+    }
+
+    /// Every point of segments from a point to a box lies in their shaft,
+    /// wherever the point is (beyond one, two or three pairs of the box's
+    /// sides, inside its extent along some axes, on a corner or an edge's
+    /// line), and boxes that lie beside the segments are culled.
+    #[test]
+    fn the_shaft_from_a_point_holds_every_segment_to_the_box() {
+        let target = Aabb {
+            min: Vec3::new(2.0, -1.0, 4.0),
+            max: Vec3::new(3.0, 1.5, 4.5),
+        };
+        let reach = [-3.0, 2.0, 2.5, 3.0, 8.0];
+        let mut culled = 0;
+        for x in reach {
+            for y in reach.map(|v| v - 1.0) {
+                for z in reach.map(|v| v + 2.0) {
+                    let apex = Vec3::new(x, y, z);
+                    let shaft = Shaft::new(apex, &target, 0.0);
+                    for q in corners(&target) {
+                        for k in 0..=8 {
+                            let at = apex + (q - apex) * (k as f32 / 8.0);
+                            let tiny = BvhAabb::new((at - 1e-4).into(), (at + 1e-4).into());
+                            assert!(shaft.meets(&tiny), "{at} outside the shaft from {apex}");
+                        }
+                    }
+                    // A small box halfway along the segment to the centre,
+                    // pushed off it sideways by more than the target's
+                    // size: outside the hull, and culled whenever a plane
+                    // separates it.
+                    let centre = 0.5 * (target.min + target.max);
+                    let middle = 0.5 * (apex + centre);
+                    let side = (centre - apex).normalize().any_orthonormal_vector() * 6.0;
+                    let aside = middle + side;
+                    let off = BvhAabb::new((aside - 0.1).into(), (aside + 0.1).into());
+                    culled += usize::from(!shaft.meets(&off));
+                }
+            }
+        }
+        assert!(culled > 0, "no box beside the segments culled");
     }
 
     /// A group's answer holds for sampled segments between the two boxes:
