@@ -573,6 +573,13 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             self.sum_visible(&tree.lights[range], weight);
             return;
         }
+        if !V::ALWAYS_VISIBLE
+            && seen != Seen::Visible
+            && let (Some(share), Some(horizon)) = (self.coarse, self.horizon)
+        {
+            self.sum_asked_coarse(&tree.lights[range], horizon, share, weight);
+            return;
+        }
         let mut values = [DVec3::ZERO; CHUNK];
         for lights in tree.lights[range].chunks(CHUNK) {
             let values = &mut values[..lights.len()];
@@ -613,6 +620,87 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         for (&k, &seen) in which[..asked].iter().zip(&seen[..asked]) {
             if seen {
                 self.settled.add(values[usize::from(k)] * weight);
+            }
+        }
+    }
+
+    /// The lights of `lights` (leaf order) of unknown visibility, where
+    /// coarse sums are used and the shader has a horizon: those that may
+    /// contribute (lit, and not surely at or below the horizon plane) are
+    /// asked about together ([`Visibility::visible_lights`], at most
+    /// [`SUM_LIGHTS_MAX`] at a time), and the visible ones summed coarsely
+    /// where the sum's error is a small enough share of it, else exactly
+    /// as [`settle_asked`](Self::settle_asked) would. No light is
+    /// evaluated before the host has answered for it.
+    ///
+    /// A light is left out only when `a . (x - p)`, computed in `f64`, is
+    /// below minus its rounding bound, so the exact value is negative and
+    /// the shader's term exactly 0 ([`Shader::horizon`]): the differences
+    /// `x - p` are within `2^-53` of their magnitudes, each product and
+    /// the two additions add as much again of the summed magnitudes `S`,
+    /// well under the `8 f64::EPSILON S` allowed. Lights on the boundary
+    /// are asked about, and their terms, at most rounding, go through the
+    /// sums' own bounds.
+    #[inline(always)]
+    fn sum_asked_coarse(&mut self, lights: &[PointLight], horizon: Vec3, share: f64, weight: f64) {
+        let (p, a) = (self.surface.point, horizon.as_dvec3());
+        self.lights += lights.len() as u32;
+        let mut visible = [PointLight::new(Vec3::ZERO, Vec3::ZERO); COARSE_LIGHTS_MAX];
+        let mut count = 0;
+        for chunk in lights.chunks(SUM_LIGHTS_MAX) {
+            let mut positions = [Vec3::ZERO; SUM_LIGHTS_MAX];
+            let mut which = [0u8; SUM_LIGHTS_MAX];
+            let mut asked = 0;
+            for (k, light) in chunk.iter().enumerate() {
+                let d = light.position.as_dvec3() - p;
+                let (x, y, z) = (a.x * d.x, a.y * d.y, a.z * d.z);
+                let slack = 8.0 * f64::EPSILON * (x.abs() + y.abs() + z.abs());
+                if light.intensity != Vec3::ZERO && (x + y) + z > -slack {
+                    positions[asked] = light.position;
+                    which[asked] = k as u8;
+                    asked += 1;
+                }
+            }
+            self.point_queries += asked as u32;
+            let mut seen = [false; SUM_LIGHTS_MAX];
+            self.visibility
+                .visible_lights(self.point, &positions[..asked], &mut seen[..asked]);
+            for (&k, &seen) in which[..asked].iter().zip(&seen[..asked]) {
+                if seen {
+                    if count == visible.len() {
+                        self.sum_seen_coarse(&visible[..count], share, weight);
+                        count = 0;
+                    }
+                    visible[count] = chunk[usize::from(k)];
+                    count += 1;
+                }
+            }
+        }
+        if count > 0 {
+            self.sum_seen_coarse(&visible[..count], share, weight);
+        }
+    }
+
+    /// The sum of `lights`, seen by the host, times `weight`, settled:
+    /// coarsely where the sum's error is at most `share` of it, else
+    /// exactly (as [`sum_visible`](Self::sum_visible), not counted again).
+    #[inline(always)]
+    fn sum_seen_coarse(&mut self, lights: &[PointLight], share: f64, weight: f64) {
+        match self
+            .shader
+            .sum_lights_coarse(&self.per_point, self.surface, lights)
+        {
+            Some((sum, error)) if error.cmple(sum * share).all() => {
+                self.settled.add(sum * weight);
+                self.settled_error += error * weight;
+            }
+            _ => {
+                for lights in lights.chunks(SUM_LIGHTS_MAX) {
+                    let sum = self
+                        .shader
+                        .sum_lights(&self.per_point, self.surface, lights);
+                    self.settled.add(sum * weight);
+                }
             }
         }
     }
