@@ -103,8 +103,9 @@ pub struct PointGroup {
 ///   traversal does. In the report's city a list holds about ten buildings,
 ///   and a shadow ray costs a few box tests instead of a traversal.
 /// * [`visible_lights`](Self::visible_lights) gets the lights of a leaf
-///   that answered `Partial` (those that contribute anything), up to 16 at
-///   a time: their rays share the point and the leaf's list, and a host can
+///   that answered `Partial` (those that may contribute: lit, and above
+///   the shader's horizon), up to 16 at a time, before any of them is
+///   evaluated: their rays share the point and the leaf's list, and a host can
 ///   test several of them against each listed occluder at once (the report's
 ///   host, four in the lanes of a vector).
 /// * The cut stops asking in a call where small nodes keep answering
