@@ -602,26 +602,40 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// and the visible ones are settled in order.
     #[inline(always)]
     fn settle_asked(&mut self, lights: &[PointLight], values: &[DVec3], weight: f64) {
-        let mut positions = [Vec3::ZERO; SUM_LIGHTS_MAX];
-        let mut which = [0u8; SUM_LIGHTS_MAX];
-        let mut asked = 0;
-        for (k, (light, value)) in lights.iter().zip(values).enumerate() {
-            if *value != DVec3::ZERO {
-                positions[asked] = light.position;
-                which[asked] = k as u8;
-                asked += 1;
-            }
-        }
         self.lights += lights.len() as u32;
-        self.point_queries += asked as u32;
-        let mut seen = [false; SUM_LIGHTS_MAX];
-        self.visibility
-            .visible_lights(self.point, &positions[..asked], &mut seen[..asked]);
+        let (asked, which, seen) = self.ask_together(lights, |k, _| values[k] != DVec3::ZERO);
         for (&k, &seen) in which[..asked].iter().zip(&seen[..asked]) {
             if seen {
                 self.settled.add(values[usize::from(k)] * weight);
             }
         }
+    }
+
+    /// Asks the host about the lights of `chunk` (at most
+    /// [`SUM_LIGHTS_MAX`]) that `ask` picks (by index and light), all at
+    /// once ([`Visibility::visible_lights`]): how many were asked, and for
+    /// each in order its index in `chunk` and whether it is visible.
+    #[inline(always)]
+    fn ask_together(
+        &mut self,
+        chunk: &[PointLight],
+        ask: impl Fn(usize, &PointLight) -> bool,
+    ) -> (usize, [u8; SUM_LIGHTS_MAX], [bool; SUM_LIGHTS_MAX]) {
+        let mut positions = [Vec3::ZERO; SUM_LIGHTS_MAX];
+        let mut which = [0u8; SUM_LIGHTS_MAX];
+        let mut asked = 0;
+        for (k, light) in chunk.iter().enumerate() {
+            if ask(k, light) {
+                positions[asked] = light.position;
+                which[asked] = k as u8;
+                asked += 1;
+            }
+        }
+        self.point_queries += asked as u32;
+        let mut seen = [false; SUM_LIGHTS_MAX];
+        self.visibility
+            .visible_lights(self.point, &positions[..asked], &mut seen[..asked]);
+        (asked, which, seen)
     }
 
     /// The lights of `lights` (leaf order) of unknown visibility, where
@@ -648,23 +662,12 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         let mut visible = [PointLight::new(Vec3::ZERO, Vec3::ZERO); COARSE_LIGHTS_MAX];
         let mut count = 0;
         for chunk in lights.chunks(SUM_LIGHTS_MAX) {
-            let mut positions = [Vec3::ZERO; SUM_LIGHTS_MAX];
-            let mut which = [0u8; SUM_LIGHTS_MAX];
-            let mut asked = 0;
-            for (k, light) in chunk.iter().enumerate() {
+            let (asked, which, seen) = self.ask_together(chunk, |_, light| {
                 let d = light.position.as_dvec3() - p;
                 let (x, y, z) = (a.x * d.x, a.y * d.y, a.z * d.z);
                 let slack = 8.0 * f64::EPSILON * (x.abs() + y.abs() + z.abs());
-                if light.intensity != Vec3::ZERO && (x + y) + z > -slack {
-                    positions[asked] = light.position;
-                    which[asked] = k as u8;
-                    asked += 1;
-                }
-            }
-            self.point_queries += asked as u32;
-            let mut seen = [false; SUM_LIGHTS_MAX];
-            self.visibility
-                .visible_lights(self.point, &positions[..asked], &mut seen[..asked]);
+                light.intensity != Vec3::ZERO && (x + y) + z > -slack
+            });
             for (&k, &seen) in which[..asked].iter().zip(&seen[..asked]) {
                 if seen {
                     if count == visible.len() {
