@@ -46,6 +46,22 @@ impl LightTree {
     /// in the memory it holds: the tree [`TreeBuilder::build`] gives, bit
     /// for bit (see [`TreeBuilder::rebuild`]).
     ///
+    /// ```
+    /// use glam::Vec3;
+    /// use manylights::{LightTree, PointLight};
+    ///
+    /// let mut lights: Vec<PointLight> = (0..1000)
+    ///     .map(|i| PointLight::new(Vec3::new((i % 40) as f32, (i / 40) as f32, 5.0), Vec3::ONE))
+    ///     .collect();
+    /// let mut tree = LightTree::build(&lights)?;
+    /// // Next frame: some lights switched off, a new one on.
+    /// lights.truncate(600);
+    /// lights.push(PointLight::new(Vec3::new(3.0, 4.0, 6.0), Vec3::splat(2.0)));
+    /// tree.rebuild(&lights)?;
+    /// assert_eq!(tree.len(), 601);
+    /// # Ok::<(), manylights::BuildError>(())
+    /// ```
+    ///
     /// # Errors
     /// As [`build`](Self::build); the tree is then left as it was.
     pub fn rebuild(&mut self, lights: &[PointLight]) -> Result<(), BuildError> {
