@@ -104,7 +104,7 @@ pub struct PointGroup {
 ///   and a shadow ray costs a few box tests instead of a traversal.
 /// * [`visible_lights`](Self::visible_lights) gets the lights of a leaf
 ///   that answered `Partial` (those that may contribute: lit, and above
-///   the shader's horizon), up to 16 at a time, before any of them is
+///   the shader's horizon), up to 32 at a time, before any of them is
 ///   evaluated: their rays share the point and the leaf's list, and a host can
 ///   test several of them against each listed occluder at once (the report's
 ///   host, four in the lanes of a vector).
@@ -134,7 +134,7 @@ pub trait Visibility {
     /// [`visible`](Self::visible) for each of `lights` from one `point`:
     /// sets `seen[i]` to `visible(point, lights[i])` (`seen` is as long as
     /// `lights`). The cut asks this way for the lights of a leaf it refines
-    /// (up to 16 at a time). The default asks [`visible`](Self::visible)
+    /// (up to 32 at a time). The default asks [`visible`](Self::visible)
     /// for each in order; a host may answer them together, e.g. testing
     /// several segments against each occluder at once, as long as every
     /// answer is the one `visible` gives.

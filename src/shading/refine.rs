@@ -611,8 +611,8 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         }
     }
 
-    /// Asks the host about the lights of `chunk` (at most
-    /// [`SUM_LIGHTS_MAX`]) that `ask` picks (by index and light), all at
+    /// Asks the host about the lights of `chunk` (at most [`ASK_MAX`])
+    /// that `ask` picks (by index and light), all at
     /// once ([`Visibility::visible_lights`]): how many were asked, and for
     /// each in order its index in `chunk` and whether it is visible.
     #[inline(always)]
@@ -620,9 +620,9 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         &mut self,
         chunk: &[PointLight],
         ask: impl Fn(usize, &PointLight) -> bool,
-    ) -> (usize, [u8; SUM_LIGHTS_MAX], [bool; SUM_LIGHTS_MAX]) {
-        let mut positions = [Vec3::ZERO; SUM_LIGHTS_MAX];
-        let mut which = [0u8; SUM_LIGHTS_MAX];
+    ) -> (usize, [u8; ASK_MAX], [bool; ASK_MAX]) {
+        let mut positions = [Vec3::ZERO; ASK_MAX];
+        let mut which = [0u8; ASK_MAX];
         let mut asked = 0;
         for (k, light) in chunk.iter().enumerate() {
             if ask(k, light) {
@@ -632,7 +632,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             }
         }
         self.point_queries += asked as u32;
-        let mut seen = [false; SUM_LIGHTS_MAX];
+        let mut seen = [false; ASK_MAX];
         self.visibility
             .visible_lights(self.point, &positions[..asked], &mut seen[..asked]);
         (asked, which, seen)
@@ -642,7 +642,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// coarse sums are used and the shader has a horizon: those that may
     /// contribute (lit, and not surely at or below the horizon plane) are
     /// asked about together ([`Visibility::visible_lights`], at most
-    /// [`SUM_LIGHTS_MAX`] at a time), and the visible ones summed coarsely
+    /// [`ASK_MAX`] at a time), and the visible ones summed coarsely
     /// where the sum's error is a small enough share of it, else exactly
     /// as [`settle_asked`](Self::settle_asked) would. No light is
     /// evaluated before the host has answered for it.
@@ -659,28 +659,22 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     fn sum_asked_coarse(&mut self, lights: &[PointLight], horizon: Vec3, share: f64, weight: f64) {
         let (p, a) = (self.surface.point, horizon.as_dvec3());
         self.lights += lights.len() as u32;
-        let mut visible = [PointLight::new(Vec3::ZERO, Vec3::ZERO); COARSE_LIGHTS_MAX];
-        let mut count = 0;
-        for chunk in lights.chunks(SUM_LIGHTS_MAX) {
+        for chunk in lights.chunks(ASK_MAX) {
             let (asked, which, seen) = self.ask_together(chunk, |_, light| {
                 let d = light.position.as_dvec3() - p;
                 let (x, y, z) = (a.x * d.x, a.y * d.y, a.z * d.z);
                 let slack = 8.0 * f64::EPSILON * (x.abs() + y.abs() + z.abs());
                 light.intensity != Vec3::ZERO && (x + y) + z > -slack
             });
+            let mut visible = [PointLight::new(Vec3::ZERO, Vec3::ZERO); ASK_MAX];
+            let mut count = 0;
             for (&k, &seen) in which[..asked].iter().zip(&seen[..asked]) {
-                if seen {
-                    if count == visible.len() {
-                        self.sum_seen_coarse(&visible[..count], share, weight);
-                        count = 0;
-                    }
-                    visible[count] = chunk[usize::from(k)];
-                    count += 1;
-                }
+                visible[count] = chunk[usize::from(k)];
+                count += usize::from(seen);
             }
-        }
-        if count > 0 {
-            self.sum_seen_coarse(&visible[..count], share, weight);
+            if count > 0 {
+                self.sum_seen_coarse(&visible[..count], share, weight);
+            }
         }
     }
 
@@ -994,6 +988,12 @@ const GIVE_UP_RATIO: u32 = 8;
 /// one, its few lights are soon asked one by one, so the classification did
 /// not pay.
 const SMALL_NODE_LIGHTS: u32 = 16;
+
+/// Most lights of a leaf asked about in one call of
+/// [`Visibility::visible_lights`]: a leaf of the default builder's at
+/// most 32 in one call where coarse sums are used (else the lights of one
+/// exact evaluation, at most [`SUM_LIGHTS_MAX`]).
+const ASK_MAX: usize = 32;
 
 /// Whether a cut of summed `(estimate, error)` meets the threshold, with
 /// the error bound exactly as it will be reported.
