@@ -9,7 +9,7 @@ use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::result::Stop;
 use super::threshold::Threshold;
 use crate::geometry::{Cone, Surface};
-use crate::numeric::{CompensatedSum, SUM_SLACK};
+use crate::numeric::{CompensatedSum, NAIVE_DOT_ACCEPT, SUM_SLACK, plain_dot_of_difference};
 use crate::shader::{COARSE_LIGHTS_MAX, COARSE_TARGET_MIN, NodeEstimate, SUM_LIGHTS_MAX, Shader};
 use crate::tree::{LightTree, NO_PLANE, Node, SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
@@ -552,21 +552,10 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         const CHUNK: usize = SUM_LIGHTS_MAX;
         let tree = self.tree;
         if seen == Seen::Visible && !self.one_by_one {
+            self.lights += range.len() as u32;
             if let Some(share) = self.coarse {
-                // Coarse sums where their error is a small enough share of
-                // them, else the sums below.
                 for lights in tree.lights[range].chunks(COARSE_LIGHTS_MAX) {
-                    match self
-                        .shader
-                        .sum_lights_coarse(&self.per_point, self.surface, lights)
-                    {
-                        Some((sum, error)) if error.cmple(sum * share).all() => {
-                            self.lights += lights.len() as u32;
-                            self.settled.add(sum * weight);
-                            self.settled_error += error * weight;
-                        }
-                        _ => self.sum_visible(lights, weight),
-                    }
+                    self.sum_seen_coarse(lights, share, weight);
                 }
                 return;
             }
@@ -647,12 +636,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// as [`settle_asked`](Self::settle_asked) would. No light is
     /// evaluated before the host has answered for it.
     ///
-    /// A light is left out only when `a . (x - p)`, computed in `f64`, is
-    /// below minus its rounding bound, so the exact value is negative and
-    /// the shader's term exactly 0 ([`Shader::horizon`]): the differences
-    /// `x - p` are within `2^-53` of their magnitudes, each product and
-    /// the two additions add as much again of the summed magnitudes `S`,
-    /// well under the `8 f64::EPSILON S` allowed. Lights on the boundary
+    /// A light is left out only when it is dark or `a . (x - p) < 0`
+    /// exactly, `a` the horizon's vector: there the shader's term is exactly
+    /// 0 ([`Shader::horizon`]). The sign is taken from the plain `f64` dot
+    /// product where it is certain (at most `-NAIVE_DOT_ACCEPT` times the
+    /// terms' magnitude, see [`NAIVE_DOT_ACCEPT`]); lights nearer the plane
     /// are asked about, and their terms, at most rounding, go through the
     /// sums' own bounds.
     #[inline(always)]
@@ -661,10 +649,8 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         self.lights += lights.len() as u32;
         for chunk in lights.chunks(ASK_MAX) {
             let (asked, which, seen) = self.ask_together(chunk, |_, light| {
-                let d = light.position.as_dvec3() - p;
-                let (x, y, z) = (a.x * d.x, a.y * d.y, a.z * d.z);
-                let slack = 8.0 * f64::EPSILON * (x.abs() + y.abs() + z.abs());
-                light.intensity != Vec3::ZERO && (x + y) + z > -slack
+                let (z, magnitude) = plain_dot_of_difference(a, light.position.as_dvec3(), p);
+                light.intensity != Vec3::ZERO && z > -NAIVE_DOT_ACCEPT * magnitude
             });
             let mut visible = [PointLight::new(Vec3::ZERO, Vec3::ZERO); ASK_MAX];
             let mut count = 0;
@@ -678,9 +664,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         }
     }
 
-    /// The sum of `lights`, seen by the host, times `weight`, settled:
-    /// coarsely where the sum's error is at most `share` of it, else
-    /// exactly (as [`sum_visible`](Self::sum_visible), not counted again).
+    /// The sum of `lights` (at most [`COARSE_LIGHTS_MAX`]), visible, times
+    /// `weight`, settled: coarsely ([`Shader::sum_lights_coarse`]) where
+    /// the sum's error is at most `share` of it channel by channel, the
+    /// error joining the settled error; else as
+    /// [`sum_visible`](Self::sum_visible). The caller counts the lights.
     #[inline(always)]
     fn sum_seen_coarse(&mut self, lights: &[PointLight], share: f64, weight: f64) {
         match self
@@ -691,24 +679,16 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 self.settled.add(sum * weight);
                 self.settled_error += error * weight;
             }
-            _ => {
-                for lights in lights.chunks(SUM_LIGHTS_MAX) {
-                    let sum = self
-                        .shader
-                        .sum_lights(&self.per_point, self.surface, lights);
-                    self.settled.add(sum * weight);
-                }
-            }
+            _ => self.sum_visible(lights, weight),
         }
     }
 
     /// The sum of `lights`, known visible, times `weight`, settled: a
     /// chunk at a time, each chunk a plain sum of non-negative terms (see
-    /// [`Shader::sum_lights`]).
+    /// [`Shader::sum_lights`]). The caller counts the lights.
     #[inline(always)]
     fn sum_visible(&mut self, lights: &[PointLight], weight: f64) {
         for lights in lights.chunks(SUM_LIGHTS_MAX) {
-            self.lights += lights.len() as u32;
             let sum = self
                 .shader
                 .sum_lights(&self.per_point, self.surface, lights);
@@ -989,10 +969,10 @@ const GIVE_UP_RATIO: u32 = 8;
 /// not pay.
 const SMALL_NODE_LIGHTS: u32 = 16;
 
-/// Most lights of a leaf asked about in one call of
-/// [`Visibility::visible_lights`]: a leaf of the default builder's at
-/// most 32 in one call where coarse sums are used (else the lights of one
-/// exact evaluation, at most [`SUM_LIGHTS_MAX`]).
+/// Most lights asked about in one call of [`Visibility::visible_lights`]:
+/// where coarse sums are used, a whole leaf of the default builder (at
+/// most 32 lights); elsewhere the lights of one exact evaluation, at most
+/// [`SUM_LIGHTS_MAX`].
 const ASK_MAX: usize = 32;
 
 /// Whether a cut of summed `(estimate, error)` meets the threshold, with

@@ -206,8 +206,7 @@ impl TreeBuilder {
 
     /// Rebuilds `tree` over `lights` with these options, in the memory the
     /// tree holds: the same tree, bit for bit, as [`build`](Self::build)
-    /// gives, which it then remembers these options for
-    /// ([`LightTree::rebuild`]).
+    /// gives. The tree keeps these options for [`LightTree::rebuild`].
     ///
     /// For scenes whose lights change from frame to frame (lights switched
     /// on and off, added or removed). A fresh build writes its tree into
