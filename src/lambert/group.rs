@@ -85,15 +85,24 @@
 //! * *Scaling.* `I_k kd_k / D^2` is computed in `f64` from the `f32` `d2`,
 //!   within `3.02 u` (relative) of `I_k kd_k / D'^2`: the lower end is
 //!   multiplied by `1 - 4 u`, the upper by `1 + 4 u`.
+//! * *One colour.* A block whose lanes' lights have one colour (see
+//!   [`groups`](crate::tree::groups)) stores channel 0's moments and, per
+//!   other channel `k`, the colour's spread `s_k >= r_max / r_min` (`r_i =
+//!   I_k,i / I_0,i`). Every term of the Lambert sum is at least 0, so the
+//!   exact `S_k / I_k` lies in `[S_0 / I_0 / s_k, s_k S_0 / I_0]`: channel
+//!   `k`'s lower end is channel 0's interval's lower end (in units, with
+//!   its point and moment allowances) divided by `s_k`, its upper end
+//!   multiplied by `s_k`, in `f64` before the factors `1 -+ 4 u`, which
+//!   cover the extra `f64` rounding (`2^-53`) with room to spare. For
+//!   white or grey lights `s_k` is exactly 1 and the results are the bits
+//!   the three channels' rows would give.
 //!
 //! A property test checks each computed quantity against the same formula
 //! evaluated in `f64` (nearly exact next to these slacks) on random and
 //! adversarial nodes, points and normals, within half of its allowance.
 
 use crate::lanes::{Real, Wide};
-use crate::tree::groups::{
-    BOX_HIGH, BOX_LOW, Block, CENTROID, COVARIANCES, OFFSETS, RADIUS, widen_half,
-};
+use crate::tree::groups::{BOX_HIGH, BOX_LOW, Block, CENTROID, RADIUS, widen_half};
 
 /// `2^-24`, the unit roundoff of `f32`.
 pub(crate) const U: f64 = 1.0 / 16_777_216.0;
@@ -239,14 +248,21 @@ pub(crate) struct Geometry<T, const N: usize> {
 
 /// Row `field` of a block.
 #[inline(always)]
-fn row<T: Real, const N: usize>(block: &Block<N>, field: usize) -> Wide<T, N> {
+fn row<T: Real, const N: usize, const R: usize, const M: usize>(
+    block: &Block<N, R, M>,
+    field: usize,
+) -> Wide<T, N> {
     Wide::from_f32(&block.rows[field])
 }
 
 /// The harmonic norms of degree `3 + d`, channel `k`, of a block (exact
 /// values of their half-precision bits).
 #[inline(always)]
-fn norms<T: Real, const N: usize>(block: &Block<N>, k: usize, d: usize) -> Wide<T, N> {
+fn norms<T: Real, const N: usize, const R: usize, const M: usize>(
+    block: &Block<N, R, M>,
+    k: usize,
+    d: usize,
+) -> Wide<T, N> {
     let row = &block.norms[3 * k + d];
     Wide(crate::lanes::array(T::default(), |i| {
         T::from_f32(widen_half(row[i]))
@@ -255,8 +271,8 @@ fn norms<T: Real, const N: usize>(block: &Block<N>, k: usize, d: usize) -> Wide<
 
 /// [`Geometry`] of a block's lanes.
 #[inline(always)]
-pub(crate) fn geometry<T: Real, const N: usize>(
-    block: &Block<N>,
+pub(crate) fn geometry<T: Real, const N: usize, const R: usize, const M: usize>(
+    block: &Block<N, R, M>,
     at: &PointView<T>,
 ) -> Geometry<T, N> {
     let [px, py, pz] = at.p.map(Wide::splat);
@@ -349,17 +365,17 @@ pub(crate) fn series_weights<T: Real, const N: usize>(
 /// / D^2` (unwidened): `c0 + (n.o - 3 c0 uh.o) / D + (15 c0 uh.S.uh - 3 c0
 /// tr S - 6 uh.S.n) / (2 D^2)`.
 #[inline(always)]
-pub(crate) fn estimate<T: Real, const N: usize>(
-    block: &Block<N>,
+pub(crate) fn estimate<T: Real, const N: usize, const R: usize, const M: usize>(
+    block: &Block<N, R, M>,
     g: &Geometry<T, N>,
     w: &SeriesWeights<T, N>,
     k: usize,
 ) -> Wide<T, N> {
-    let o = |a: usize| row::<T, N>(block, OFFSETS + 3 * k + a);
+    let o = |a: usize| row::<T, N, R, M>(block, Block::<N, R, M>::offset_row(k, a));
     let first = (w.grad[0] * o(0) + w.grad[1] * o(1) + w.grad[2] * o(2)) * g.inv_d;
     let mut second = Wide::of(0.0);
     for (e, weight) in w.second.into_iter().enumerate() {
-        second += row::<T, N>(block, COVARIANCES + 6 * k + e) * weight;
+        second += row::<T, N, R, M>(block, Block::<N, R, M>::covariance_row(k, e)) * weight;
     }
     g.c0 + first + second * w.half_inv_d2
 }
@@ -406,8 +422,8 @@ pub(crate) fn remainder_terms<T: Real, const N: usize>(
 /// D^2` (as [`series_width`](super::series)'s, unwidened), with `mu_2 =
 /// tr(S_k) / D^2`.
 #[inline(always)]
-pub(crate) fn remainder<T: Real, const N: usize>(
-    block: &Block<N>,
+pub(crate) fn remainder<T: Real, const N: usize, const R: usize, const M: usize>(
+    block: &Block<N, R, M>,
     g: &Geometry<T, N>,
     r: &RemainderTerms<T, N>,
     mu2: Wide<T, N>,
@@ -419,7 +435,7 @@ pub(crate) fn remainder<T: Real, const N: usize>(
     let mut sigma_m = sigma * sigma * sigma;
     for d in 0..3 {
         let m = (d + 3) as f64;
-        let q = norms::<T, N>(block, k, d) * sigma_m;
+        let q = norms::<T, N, R, M>(block, k, d) * sigma_m;
         let across =
             q * (r.ac * Wide::of(m + 1.0)) + mu_prev * (r.hperp * Wide::of(0.5 * m * (m + 1.0)));
         total += (q * r.harmonic[d]).min(across);
@@ -432,10 +448,12 @@ pub(crate) fn remainder<T: Real, const N: usize>(
 }
 
 /// The bounds of a block's lanes (see the module docs), each end in `f64`
-/// units of radiance: the `f32` interval times `I_k kd_k / D^2`.
+/// units of radiance: the `f32` interval times `I_k kd_k / D^2`. A grey
+/// block's one channel stands for all three (the same bits as from three
+/// copies of it).
 #[inline(always)]
-pub(crate) fn lane_bounds<const N: usize>(
-    block: &Block<N>,
+pub(crate) fn lane_bounds<const N: usize, const R: usize, const M: usize>(
+    block: &Block<N, R, M>,
     at: &PointView<f32>,
     scales: &LaneScales<N>,
 ) -> LaneBounds<N> {
@@ -492,9 +510,9 @@ pub(crate) fn lane_bounds<const N: usize>(
     // `1.75 sigma` for any build rounding `delta` below 1% (it is about
     // `1e-12`).
     let x = w(1.75) * sigma;
-    for k in 0..3 {
+    for k in 0..Block::<N, R, M>::CHANNELS {
         let e = estimate(block, &g, &weights, k);
-        let s = |e: usize| row::<f32, N>(block, COVARIANCES + 6 * k + e);
+        let s = |e: usize| row::<f32, N, R, M>(block, Block::<N, R, M>::covariance_row(k, e));
         // The stored diagonal entries are at least 0 (rounded upward).
         let trace = s(0) + s(1) + s(2);
         let entries = trace + s(3).abs() + s(4).abs() + s(5).abs();
@@ -524,13 +542,28 @@ pub(crate) fn lane_bounds<const N: usize>(
     let mut upper = [[0.0; N]; 3];
     let mut estimate = [[0.0; N]; 3];
     for k in 0..3 {
+        // A one-colour block's channel 0 stands for the others.
+        let c = k.min(Block::<N, R, M>::CHANNELS - 1);
         // Both intervals contain the exact value; if rounding beyond the
         // allowances ever made them disjoint, the paper's holds.
-        let a = Wide::select_ge(zero, disjoint, lo[k], lower_paper).widen();
-        let b = Wide::select_ge(zero, disjoint, hi[k], upper_paper).widen();
+        let a = Wide::select_ge(zero, disjoint, lo[c], lower_paper).widen();
+        let b = Wide::select_ge(zero, disjoint, hi[c], upper_paper).widen();
         let scale = Wide(scales.intensity[k]) * inv_d2_64;
-        let l = ((a - point64 - sums) * scale * down).max(Wide::of(0.0));
-        let h = (b + point64 + sums) * scale * up;
+        let (l, h) = if c == k {
+            (
+                (a - point64 - sums) * scale * down,
+                (b + point64 + sums) * scale * up,
+            )
+        } else {
+            // Channel 0's interval, divided and multiplied by the colour's
+            // spread (exactly 1 for white lights: the same bits as above).
+            let spread = row::<f32, N, R, M>(block, Block::<N, R, M>::spread_row(k)).widen();
+            (
+                (a - point64 - sums) * scale / spread * down,
+                (b + point64 + sums) * scale * spread * up,
+            )
+        };
+        let l = l.max(Wide::of(0.0));
         lower[k] = l.0;
         upper[k] = h.0;
         estimate[k] = (Wide::of(0.5) * (l + h)).0;
@@ -553,7 +586,7 @@ mod tests {
 
     use super::*;
     use crate::testing::uniform;
-    use crate::tree::groups::Group;
+    use crate::tree::groups::{Group, with_block};
     use crate::{LightTree, PointLight};
 
     /// The largest ratio of an observed error to its allowance, per
@@ -575,8 +608,8 @@ mod tests {
     /// One lane's `f32` quantities against the same formulas in `f64` at
     /// the point `p'` the rounded offset stands for (module docs): each
     /// within its allowance.
-    fn check_lane<const N: usize>(
-        block: &Block<N>,
+    fn check_lane<const N: usize, const R: usize, const M: usize>(
+        block: &Block<N, R, M>,
         lane: usize,
         point: Vec3,
         normal: DVec3,
@@ -586,7 +619,7 @@ mod tests {
             p: point.to_array(),
             n: normal.as_vec3().to_array(),
         };
-        let g32 = geometry::<f32, N>(block, &at32);
+        let g32 = geometry::<f32, N, R, M>(block, &at32);
         let (d2, sigma) = (f64::from(g32.d2.0[lane]), f64::from(g32.sigma.0[lane]));
         if !(d2 >= D2_RANGE.0 && d2 <= D2_RANGE.1 && sigma < SIGMA_MAX) {
             return;
@@ -607,7 +640,7 @@ mod tests {
             p: moved.to_array(),
             n: normal.to_array(),
         };
-        let mut g64 = geometry::<f64, N>(block, &at64);
+        let mut g64 = geometry::<f64, N, R, M>(block, &at64);
         // The exact R / D at p' (to f64 precision), without the f32 path's
         // upward nudge.
         g64.sigma = Wide(g64.sigma.0.map(|s| s / SIGMA_UP));
@@ -633,7 +666,7 @@ mod tests {
             p: point.as_dvec3().to_array(),
             n: normal.to_array(),
         };
-        let gp = geometry::<f64, N>(block, &at_p);
+        let gp = geometry::<f64, N, R, M>(block, &at_p);
         let top = |g: &Geometry<f64, N>| l64(g.height) + l64(g.box_mid) + l64(g.box_reach);
         let top32 = l32(g32.height) + l32(g32.box_mid) + l32(g32.box_reach);
         let size = dist + l64(gp.box_size);
@@ -645,15 +678,17 @@ mod tests {
         let w32 = series_weights(&at32, &g32);
         let w64 = series_weights(&at64, &g64);
         let inv_d = 1.0 / dist;
-        for k in 0..3 {
+        let offset = |k: usize, a: usize| Block::<N, R, M>::offset_row(k, a);
+        let covariance = |k: usize, e: usize| Block::<N, R, M>::covariance_row(k, e);
+        for k in 0..Block::<N, R, M>::CHANNELS {
             let e32 = l32(estimate(block, &g32, &w32, k));
             let e64 = l64(estimate(block, &g64, &w64, k));
             let x: f64 = (0..3)
-                .map(|a| f64::from(block.rows[OFFSETS + 3 * k + a][lane]).abs())
+                .map(|a| f64::from(block.rows[offset(k, a)][lane]).abs())
                 .sum::<f64>()
                 * inv_d;
             let y: f64 = (0..6)
-                .map(|e| f64::from(block.rows[COVARIANCES + 6 * k + e][lane]).abs())
+                .map(|e| f64::from(block.rows[covariance(k, e)][lane]).abs())
                 .sum::<f64>()
                 * inv_d
                 * inv_d;
@@ -674,12 +709,12 @@ mod tests {
             );
             let trace = |scale: f64| {
                 (0..3)
-                    .map(|e| f64::from(block.rows[COVARIANCES + 6 * k + e][lane]))
+                    .map(|e| f64::from(block.rows[covariance(k, e)][lane]))
                     .sum::<f64>()
                     * scale
             };
             let mu2_32 = {
-                let s = |e: usize| Wide::<f32, N>::from_f32(&block.rows[COVARIANCES + 6 * k + e]);
+                let s = |e: usize| Wide::<f32, N>::from_f32(&block.rows[covariance(k, e)]);
                 (s(0) + s(1) + s(2)) * g32.inv_d * g32.inv_d
             };
             let r32 = l32(remainder(block, &g32, &t32, mu2_32, k)) * (1.0 + REMAINDER * U);
@@ -709,6 +744,7 @@ mod tests {
         let mut state = 17u64;
         let mut u = move || f64::from(uniform(&mut state));
         let mut worst = Worst::default();
+        let mut greys = 0;
         for scene in 0..40 {
             let shape = scene % 4;
             let centre =
@@ -723,7 +759,12 @@ mod tests {
                         2 => DVec3::new(a.x, 1e-4 * a.y, 1e-4 * a.z),
                         _ => a.normalize_or_zero(),
                     };
-                    let colour = Vec3::new(u() as f32, u() as f32 * 2.0, u() as f32 * 0.1);
+                    // Every fifth scene white: grey blocks.
+                    let colour = if scene % 5 == 4 {
+                        Vec3::splat(u() as f32)
+                    } else {
+                        Vec3::new(u() as f32, u() as f32 * 2.0, u() as f32 * 0.1)
+                    };
                     PointLight::new((centre + offset * extent).as_vec3(), colour)
                 })
                 .collect();
@@ -752,14 +793,12 @@ mod tests {
                         1 => (side + uh * 1e-4 * (u() - 0.5)).normalize(),
                         _ => (uh + side * 0.3 * (u() - 0.5)).normalize(),
                     };
-                    match group {
-                        Group::Four(block) => check_lane(block, lane, point, normal, &mut worst),
-                        Group::Eight(block) => check_lane(block, lane, point, normal, &mut worst),
-                    }
+                    with_block!(group, block => check_lane(block, lane, point, normal, &mut worst));
+                    greys += usize::from(matches!(group, Group::MonoFour(_) | Group::MonoEight(_)));
                 }
             }
         }
-        assert!(worst.lanes > 2000, "{worst:?}");
+        assert!(worst.lanes > 2000 && greys > 200, "{greys} {worst:?}");
         for (what, r) in [
             ("sigma", worst.sigma),
             ("offsets", worst.offsets),
@@ -771,5 +810,103 @@ mod tests {
         ] {
             assert!(r <= 1.0, "{what}: {r} of its allowance ({worst:?})");
         }
+    }
+
+    /// A one-colour block's bounds: for white or grey lights of any
+    /// intensity, the very bits of those of the block of three channels
+    /// made of the same children; for lights of one colour scaled by
+    /// random factors, intervals holding each channel's exact sum over the
+    /// child's lights. Seen from random points and normals.
+    #[test]
+    fn one_colour_blocks_bound_each_channel() {
+        let mut state = 23u64;
+        let mut u = move || uniform(&mut state);
+        let (mut compared, mut contained) = (0, 0);
+        for scene in 0..12 {
+            let extent = [1.0, 1e3, 1e-2][scene % 3];
+            let white = scene % 2 == 0;
+            let lights: Vec<PointLight> = (0..2000)
+                .map(|_| {
+                    let p = Vec3::new(u() - 0.5, u() - 0.5, (u() - 0.5) * 0.3) * extent;
+                    // Sodium, tinted by up to 2^-12 from one side to the
+                    // other.
+                    let tint = (p.x / extent + 0.5) / 4096.0;
+                    let colour = if white {
+                        Vec3::ONE
+                    } else {
+                        Vec3::new(1.0, 0.55 * (1.0 + tint), 0.2 * (1.0 - tint))
+                    };
+                    PointLight::new(p, colour * 10f32.powf(4.0 * u() - 2.0))
+                })
+                .collect();
+            let tree = LightTree::build(&lights).unwrap();
+            let spreads = crate::tree::groups::colour_spreads(tree.nodes(), tree.lights());
+            for (index, parent) in tree.nodes().iter().enumerate() {
+                if parent.is_leaf() {
+                    continue;
+                }
+                let range = parent.children();
+                let (children, spreads) = (&tree.nodes()[range.clone()], &spreads[range]);
+                let dir = Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5).normalize_or(Vec3::Z);
+                let p = dir * extent * (0.3 + 3.0 * u());
+                let n = Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5).normalize_or(Vec3::Z);
+                let at = PointView {
+                    p: p.to_array(),
+                    n: n.to_array(),
+                };
+                let kd = [0.7, 1.1, 0.2];
+                let mut scales = LaneScales {
+                    intensity: [[0.0; 8]; 3],
+                    moment_error: [0.0; 8],
+                };
+                for i in 0..8 {
+                    let child = &children[i.min(children.len() - 1)];
+                    for (k, &kd) in kd.iter().enumerate() {
+                        scales.intensity[k][i] = child.intensity[k] * kd;
+                    }
+                    scales.moment_error[i] = child.moment_error();
+                }
+                let (mono, colour) = match tree.groups.children(index) {
+                    Some(Group::MonoEight(mono)) => (
+                        lane_bounds(mono, &at, &scales),
+                        Block::<8>::of(children, spreads),
+                    ),
+                    Some(Group::MonoFour(_)) | None => continue,
+                    Some(_) => panic!("lights of one colour in a block of three channels"),
+                };
+                if white {
+                    let colour = lane_bounds(&colour, &at, &scales);
+                    let bits = |x: &[[f64; 8]; 3]| x.map(|c| c.map(f64::to_bits));
+                    assert_eq!(bits(&mono.lower), bits(&colour.lower));
+                    assert_eq!(bits(&mono.upper), bits(&colour.upper));
+                    assert_eq!(bits(&mono.estimate), bits(&colour.estimate));
+                    compared += 1;
+                    continue;
+                }
+                for (i, child) in children.iter().enumerate() {
+                    if !matches!(mono.state(i), Lane::Bounded | Lane::Reaching) {
+                        continue;
+                    }
+                    for (k, &kd) in kd.iter().enumerate() {
+                        let exact: f64 = tree.lights()[child.lights()]
+                            .iter()
+                            .map(|l| {
+                                let v = l.position.as_dvec3() - p.as_dvec3();
+                                let cos = n.as_dvec3().dot(v).max(0.0);
+                                f64::from(l.intensity[k]) * kd * cos / v.length().powi(3)
+                            })
+                            .sum();
+                        let (lo, hi) = (mono.lower[k][i], mono.upper[k][i]);
+                        let slack = 1e-12 * hi;
+                        assert!(
+                            lo <= exact + slack && exact <= hi + slack,
+                            "channel {k}: {lo} <= {exact} <= {hi}"
+                        );
+                        contained += 1;
+                    }
+                }
+            }
+        }
+        assert!(compared > 100 && contained > 1000, "{compared} {contained}");
     }
 }

@@ -15,7 +15,7 @@ use crate::numeric::{
     COS_SLACK, NAIVE_DOT_ACCEPT, SECOND_ORDER_SLACK, SERIES_SLACK, dot_of_difference,
 };
 use crate::shader::{NodeEstimate, Shader, ViewIndependent, colour_or_clamped, try_colour};
-use crate::tree::groups::{Block, Group};
+use crate::tree::groups::{Block, with_block};
 use crate::tree::{LightTree, Node};
 use crate::{PointLight, ShadeError};
 
@@ -414,16 +414,10 @@ impl Shader for Lambert {
             n: surface.normal.as_vec3().to_array(),
         };
         let children = &tree.nodes()[node.children()];
-        match group {
-            Group::Four(block) => {
-                let lanes = group_bounds(block, &at, &self.scales(children));
-                self.fill_children(surface, children, wanted, &lanes, out);
-            }
-            Group::Eight(block) => {
-                let lanes = group_bounds(block, &at, &self.scales(children));
-                self.fill_children(surface, children, wanted, &lanes, out);
-            }
-        }
+        with_block!(group, block => {
+            let lanes = group_bounds(block, &at, &self.scales(children));
+            self.fill_children(surface, children, wanted, &lanes, out);
+        });
         true
     }
 
@@ -837,8 +831,8 @@ impl Lambert {
 // `dispatch`).
 #[allow(unsafe_code)]
 #[inline(never)]
-fn group_bounds<const N: usize>(
-    block: &Block<N>,
+fn group_bounds<const N: usize, const R: usize, const M: usize>(
+    block: &Block<N, R, M>,
     at: &group::PointView<f32>,
     scales: &group::LaneScales<N>,
 ) -> group::LaneBounds<N> {
@@ -855,8 +849,8 @@ fn group_bounds<const N: usize>(
 /// [`group::lane_bounds`] compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn group_bounds_avx2<const N: usize>(
-    block: &Block<N>,
+fn group_bounds_avx2<const N: usize, const R: usize, const M: usize>(
+    block: &Block<N, R, M>,
     at: &group::PointView<f32>,
     scales: &group::LaneScales<N>,
 ) -> group::LaneBounds<N> {

@@ -9,6 +9,19 @@
 //! lanes past the children repeat the last child (finite values, ignored by
 //! the readers). A table gives each node's block.
 //!
+//! Children whose lights all have one colour form a one-colour block
+//! ([`MonoBlock`]): it stores channel 0's moments only, and per lane and
+//! per other channel `k` the spread of the members' colour, an upper bound
+//! on `max_i r_i / min_i r_i` with `r_i = I_k,i / I_0,i` (see
+//! [`colour_spreads`]). That is half the bytes, and a third of the
+//! per-channel work for its readers, which bound channel `k` from channel
+//! 0 (see [`lane_bounds`](crate::lambert)'s module). White or grey lights
+//! have a spread of exactly 1, and their readers' results are the very
+//! bits they would have computed from three channels (the moments are
+//! computed channel by channel with the same operations, so equal
+//! intensities give equal moments); lights of one colour scaled by
+//! different factors have a spread within a few `f32` roundings of 1.
+//!
 //! What a lane holds is taken from the node's own statistics (see
 //! [`Node`]) without further rounding, except for two fields: its box,
 //! stored relative to its centroid and rounded outward, so that it still
@@ -18,12 +31,24 @@
 
 use super::layout::{LightTree, Node};
 use super::pool::Pool;
+use crate::PointLight;
 
 /// `f32` rows of a block, one per field.
-pub(crate) const ROWS: usize = 37;
+pub(crate) const ROWS: usize = OFFSETS + 9 * 3;
 /// Half-precision rows of a block: the harmonic norms, channel `k`,
 /// degree `3 + d` at `3 k + d`.
-pub(crate) const NORMS: usize = 9;
+pub(crate) const NORMS: usize = 3 * 3;
+/// `f32` rows of a one-colour block: channel 0's offsets and second
+/// moments, then the colour's spreads of channels 1 and 2 (see
+/// [`Block::spread_row`]).
+pub(crate) const MONO_ROWS: usize = OFFSETS + 9 + 2;
+/// Half-precision rows of a one-colour block: channel 0's harmonic norms.
+pub(crate) const MONO_NORMS: usize = 3;
+/// Largest colour spread of a one-colour block's lanes: children whose
+/// lights' colours differ more are kept in blocks of three channels, whose
+/// bounds are tighter for them. Lights of one colour scaled by different
+/// factors in `f32` differ by a few roundings, about `2^-22`.
+const MONO_SPREAD_MAX: f64 = 1.0 + 1.0 / 4096.0;
 
 /// Row of the centroid's `x` (`y` and `z` follow).
 pub(crate) const CENTROID: usize = 0;
@@ -37,18 +62,53 @@ pub(crate) const BOX_HIGH: usize = 7;
 /// Rows of the channel offsets `o_k`: channel `k`, axis `a` at
 /// `OFFSETS + 3 k + a`.
 pub(crate) const OFFSETS: usize = 10;
-/// Rows of the second moments `S_k`: channel `k`, entry `e` (`[xx, yy, zz,
-/// xy, xz, yz]`) at `COVARIANCES + 6 k + e`.
-pub(crate) const COVARIANCES: usize = 19;
+/// Rows of the second moments `S_k` in a block of three channels:
+/// channel `k`, entry `e` (`[xx, yy, zz, xy, xz, yz]`) at `COVARIANCES + 6
+/// k + e` (see [`Block::covariance_row`]).
+pub(crate) const COVARIANCES: usize = OFFSETS + 9;
 
-/// A node's children side by side, `N` lanes.
+/// A node's children side by side, `N` lanes, with `R` rows of `f32`
+/// fields and `M` of half-precision norms: three channels' moments
+/// ([`ROWS`], [`NORMS`]) or, in a [`MonoBlock`], one's.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Block<const N: usize> {
-    /// The `f32` fields ([`ROWS`] of them).
-    pub(crate) rows: [[f32; N]; ROWS],
-    /// The harmonic norms, half-precision bits rounded upward ([`NORMS`]
-    /// of them).
-    pub(crate) norms: [[u16; N]; NORMS],
+pub(crate) struct Block<const N: usize, const R: usize = ROWS, const M: usize = NORMS> {
+    /// The `f32` fields.
+    pub(crate) rows: [[f32; N]; R],
+    /// The harmonic norms, half-precision bits rounded upward.
+    pub(crate) norms: [[u16; N]; M],
+}
+
+/// A block whose lanes' lights have one colour: channel 0's moments and
+/// the colour's spreads (see the module docs).
+pub(crate) type MonoBlock<const N: usize> = Block<N, MONO_ROWS, MONO_NORMS>;
+
+impl<const N: usize, const R: usize, const M: usize> Block<N, R, M> {
+    /// The channels whose moments are stored: 3, or 1 in a one-colour
+    /// block.
+    pub(crate) const CHANNELS: usize = M / 3;
+
+    /// Row of channel `k`'s offset along axis `a` (`k` below
+    /// [`Self::CHANNELS`]).
+    #[inline(always)]
+    pub(crate) const fn offset_row(k: usize, a: usize) -> usize {
+        OFFSETS + 3 * k + a
+    }
+
+    /// Row of channel `k`'s second moment `e` (`k` below
+    /// [`Self::CHANNELS`]).
+    #[inline(always)]
+    pub(crate) const fn covariance_row(k: usize, e: usize) -> usize {
+        OFFSETS + 3 * Self::CHANNELS + 6 * k + e
+    }
+
+    /// Row of the colour's spread of channel `k` (1 or 2) in a one-colour
+    /// block: at least `max_i r_i / min_i r_i`, `r_i = I_k,i / I_0,i` over
+    /// the lane's lights with some intensity, and exactly 1 where every
+    /// such `r_i` is 1 or where channel `k` is 0 throughout.
+    #[inline(always)]
+    pub(crate) const fn spread_row(k: usize) -> usize {
+        OFFSETS + 9 * Self::CHANNELS + k - 1
+    }
 }
 
 /// The blocks of every node's children (see the module docs).
@@ -56,8 +116,11 @@ pub(crate) struct Block<const N: usize> {
 pub(crate) struct NodeGroups {
     fours: Vec<Block<4>>,
     eights: Vec<Block<8>>,
-    /// Per node, its children's block: an index into `fours`, or into
-    /// `eights` with [`EIGHT`] set; [`NO_BLOCK`] for a leaf.
+    mono_fours: Vec<MonoBlock<4>>,
+    mono_eights: Vec<MonoBlock<8>>,
+    /// Per node, its children's block: an index into `fours`, into
+    /// `eights` with [`EIGHT`] set, into `mono_fours` with [`MONO`] set, or
+    /// into `mono_eights` with both; [`NO_BLOCK`] for a leaf.
     at: Vec<u32>,
 }
 
@@ -73,6 +136,8 @@ const PARALLEL_BLOCKS: usize = if cfg!(test) { 64 } else { 8192 };
 const NO_BLOCK: u32 = u32::MAX;
 /// The table's flag for a block of eight lanes.
 const EIGHT: u32 = 1 << 31;
+/// The table's flag for a one-colour block.
+const MONO: u32 = 1 << 30;
 
 /// The children of one node.
 #[derive(Clone, Copy, Debug)]
@@ -81,32 +146,57 @@ pub(crate) enum Group<'a> {
     Four(&'a Block<4>),
     /// Five to eight children.
     Eight(&'a Block<8>),
+    /// At most four children of one colour.
+    MonoFour(&'a MonoBlock<4>),
+    /// Five to eight children of one colour.
+    MonoEight(&'a MonoBlock<8>),
 }
+
+/// `$body` with `$block` bound to the block of `$group`, whatever its kind.
+macro_rules! with_block {
+    ($group:expr, $block:ident => $body:expr) => {
+        match $group {
+            $crate::tree::groups::Group::Four($block) => $body,
+            $crate::tree::groups::Group::Eight($block) => $body,
+            $crate::tree::groups::Group::MonoFour($block) => $body,
+            $crate::tree::groups::Group::MonoEight($block) => $body,
+        }
+    };
+}
+pub(crate) use with_block;
 
 impl Group<'_> {
     /// The block's address range.
     #[inline(always)]
     pub(crate) fn bytes(&self) -> core::ops::Range<usize> {
-        let (start, len) = match self {
-            Group::Four(b) => (core::ptr::from_ref(*b) as usize, size_of::<Block<4>>()),
-            Group::Eight(b) => (core::ptr::from_ref(*b) as usize, size_of::<Block<8>>()),
-        };
+        let (start, len) =
+            with_block!(self, b => (core::ptr::from_ref(*b) as usize, size_of_val(*b)));
         start..start + len
     }
 }
 
-impl<const N: usize> Block<N> {
-    /// The block of `children` (at most `N`, at least one).
-    fn of(children: &[Node]) -> Self {
+impl<const N: usize, const R: usize, const M: usize> Block<N, R, M> {
+    /// The block of `children` (at most `N`, at least one), whose colour
+    /// spreads are `spreads` (read by one-colour blocks only).
+    pub(crate) fn of(children: &[Node], spreads: &[[f32; 2]]) -> Self {
         let mut block = Self {
-            rows: [[0.0; N]; ROWS],
-            norms: [[0; N]; NORMS],
+            rows: [[0.0; N]; R],
+            norms: [[0; N]; M],
         };
+        // A one-colour block keeps channel 0's rows (the same fields up to
+        // its offsets, then its second moments), then the spreads.
+        let moments_end = Self::covariance_row(Self::CHANNELS - 1, 6);
         for lane in 0..N {
-            let child = &children[lane.min(children.len() - 1)];
-            let (rows, norms) = lane_values(child);
-            for (row, value) in block.rows.iter_mut().zip(rows) {
-                row[lane] = value;
+            let last = lane.min(children.len() - 1);
+            let (rows, norms) = lane_values(&children[last]);
+            for (i, row) in block.rows.iter_mut().enumerate() {
+                row[lane] = if i < Self::covariance_row(0, 0) {
+                    rows[i]
+                } else if i < moments_end {
+                    rows[i - Self::covariance_row(0, 0) + COVARIANCES]
+                } else {
+                    spreads[last][i - moments_end]
+                };
             }
             for (row, value) in block.norms.iter_mut().zip(norms) {
                 row[lane] = value;
@@ -116,40 +206,122 @@ impl<const N: usize> Block<N> {
     }
 }
 
+/// Per node, the spread of its lights' colour in channels 1 and 2: an
+/// upper bound, rounded up to `f32`, on `max_i r_i / min_i r_i` with `r_i =
+/// I_k,i / I_0,i` over the members with some intensity; exactly 1 where
+/// every `r_i` is 1 (white or grey lights) or where channel `k` is 0 in
+/// every member; infinity where a member has some intensity but none in
+/// channel 0, or none in channel `k` while another has some. Computed from
+/// the leaves up (children follow their parents), one read of the lights.
+///
+/// A channel's Lambert sum over a node of spread `s` is within a factor
+/// `s` of channel 0's scaled to channel `k`'s total: every term is at
+/// least 0, so `S_k = sum r_i I_0,i f_i` lies in `[r_min S_0, r_max S_0]`
+/// and `I_k = sum r_i I_0,i` in `[r_min I_0, r_max I_0]`, whence `S_k / I_k`
+/// lies within `[S_0 / I_0 / s, s S_0 / I_0]`.
+pub(crate) fn colour_spreads(nodes: &[Node], lights: &[PointLight]) -> Vec<[f32; 2]> {
+    // Per node and channel 1, 2: the smallest and largest ratio, each
+    // computed within one rounding (2^-53 relative) of its value.
+    let mut ranges = vec![[(f64::INFINITY, 0.0f64); 2]; nodes.len()];
+    for index in (0..nodes.len()).rev() {
+        let node = &nodes[index];
+        let mut range = [(f64::INFINITY, 0.0f64); 2];
+        let widen = |range: &mut [(f64, f64); 2], k: usize, (low, high): (f64, f64)| {
+            range[k] = (range[k].0.min(low), range[k].1.max(high));
+        };
+        if node.is_leaf() {
+            for light in lights.get(node.lights()).unwrap_or(&[]) {
+                let i = light.intensity.as_dvec3();
+                if i == glam::DVec3::ZERO {
+                    continue;
+                }
+                for k in 0..2 {
+                    let r = if i.x > 0.0 {
+                        i[k + 1] / i.x
+                    } else {
+                        f64::INFINITY
+                    };
+                    widen(&mut range, k, (r, r));
+                }
+            }
+        } else {
+            for child in node.children() {
+                for (k, &child_range) in ranges[child].iter().enumerate() {
+                    widen(&mut range, k, child_range);
+                }
+            }
+        }
+        ranges[index] = range;
+    }
+    ranges
+        .iter()
+        .map(|range| {
+            range.map(|(low, high)| {
+                if high == 0.0 || (low == 1.0 && high == 1.0) {
+                    1.0
+                } else if low > 0.0 && high < f64::INFINITY {
+                    // Both ratios within 2^-53 of their values, and the
+                    // quotient's own rounding: 2^-50 covers them.
+                    crate::numeric::round_up_f32(high / low * (1.0 + 1.0 / (1u64 << 50) as f64))
+                } else {
+                    f32::INFINITY
+                }
+            })
+        })
+        .collect()
+}
+
 impl NodeGroups {
-    /// The blocks of `nodes` (a built tree's, root first).
-    pub(crate) fn new(nodes: &[Node]) -> Self {
-        Self::new_on(nodes, Pool::ONE)
+    /// The blocks of `nodes` (a built tree's, root first, whose member
+    /// lights are `lights`).
+    pub(crate) fn new(nodes: &[Node], lights: &[PointLight]) -> Self {
+        Self::new_on(nodes, lights, Pool::ONE)
     }
 
     /// [`NodeGroups::new`], the blocks filled on `pool` (the same blocks).
-    pub(crate) fn new_on(nodes: &[Node], pool: Pool) -> Self {
+    pub(crate) fn new_on(nodes: &[Node], lights: &[PointLight], pool: Pool) -> Self {
         let mut groups = Self::default();
-        groups.refill(nodes, pool);
+        groups.refill(nodes, lights, pool);
         groups
     }
 
-    /// Makes these the blocks of `nodes`, filled on `pool`, in the memory
-    /// they hold (the same blocks as [`NodeGroups::new_on`]).
-    pub(crate) fn refill(&mut self, nodes: &[Node], pool: Pool) {
+    /// Makes these the blocks of `nodes` (whose member lights are
+    /// `lights`), filled on `pool`, in the memory they hold (the same
+    /// blocks as [`NodeGroups::new_on`]).
+    pub(crate) fn refill(&mut self, nodes: &[Node], lights: &[PointLight], pool: Pool) {
+        let spreads = colour_spreads(nodes, lights);
         let at = &mut self.at;
         at.clear();
         at.resize(nodes.len(), NO_BLOCK);
         let (mut fours, mut eights) = (Vec::new(), Vec::new());
+        let (mut mono_fours, mut mono_eights) = (Vec::new(), Vec::new());
         for (index, parent) in nodes.iter().enumerate() {
             if parent.is_leaf() {
                 continue;
             }
-            // Node counts fit in `u32`, and so do block counts (fewer).
-            at[index] = if parent.child_count <= 4 {
-                fours.push(index);
-                (fours.len() - 1) as u32
-            } else {
-                eights.push(index);
-                (eights.len() - 1) as u32 | EIGHT
+            let mono = spreads[parent.children()]
+                .iter()
+                .all(|s| s.iter().all(|&s| f64::from(s) <= MONO_SPREAD_MAX));
+            let (list, flags) = match (parent.child_count <= 4, mono) {
+                (true, false) => (&mut fours, 0),
+                (false, false) => (&mut eights, EIGHT),
+                (true, true) => (&mut mono_fours, MONO),
+                (false, true) => (&mut mono_eights, EIGHT | MONO),
             };
+            list.push(index);
+            // Node counts fit in `u32`, and so do block counts (fewer; at
+            // most 2^29 blocks of each kind for the flags, with at least
+            // two children each against at most 2^32 nodes).
+            at[index] = (list.len() - 1) as u32 | flags;
         }
-        let block = |&index: &usize| &nodes[nodes[index].children()];
+        fn block<const N: usize, const R: usize, const M: usize>(
+            nodes: &[Node],
+            spreads: &[[f32; 2]],
+            index: usize,
+        ) -> Block<N, R, M> {
+            let children = nodes[index].children();
+            Block::of(&nodes[children.clone()], &spreads[children])
+        }
         let on = |blocks: usize| {
             if blocks >= PARALLEL_BLOCKS {
                 pool
@@ -157,8 +329,14 @@ impl NodeGroups {
                 Pool::ONE
             }
         };
-        on(fours.len()).map_into(&fours, &mut self.fours, |i| Block::of(block(i)));
-        on(eights.len()).map_into(&eights, &mut self.eights, |i| Block::of(block(i)));
+        on(fours.len()).map_into(&fours, &mut self.fours, |&i| block(nodes, &spreads, i));
+        on(eights.len()).map_into(&eights, &mut self.eights, |&i| block(nodes, &spreads, i));
+        on(mono_fours.len()).map_into(&mono_fours, &mut self.mono_fours, |&i| {
+            block(nodes, &spreads, i)
+        });
+        on(mono_eights.len()).map_into(&mono_eights, &mut self.mono_eights, |&i| {
+            block(nodes, &spreads, i)
+        });
     }
 
     /// The children of node `index`, or `None` for a leaf.
@@ -166,11 +344,14 @@ impl NodeGroups {
     pub(crate) fn children(&self, index: usize) -> Option<Group<'_>> {
         let at = *self.at.get(index)?;
         if at == NO_BLOCK {
-            None
-        } else if at & EIGHT == 0 {
-            self.fours.get(at as usize).map(Group::Four)
-        } else {
-            self.eights.get((at & !EIGHT) as usize).map(Group::Eight)
+            return None;
+        }
+        let i = (at & !(EIGHT | MONO)) as usize;
+        match (at & EIGHT != 0, at & MONO != 0) {
+            (false, false) => self.fours.get(i).map(Group::Four),
+            (true, false) => self.eights.get(i).map(Group::Eight),
+            (false, true) => self.mono_fours.get(i).map(Group::MonoFour),
+            (true, true) => self.mono_eights.get(i).map(Group::MonoEight),
         }
     }
 
@@ -178,13 +359,24 @@ impl NodeGroups {
     pub(crate) fn memory_bytes(&self) -> usize {
         self.fours.capacity() * size_of::<Block<4>>()
             + self.eights.capacity() * size_of::<Block<8>>()
+            + self.mono_fours.capacity() * size_of::<MonoBlock<4>>()
+            + self.mono_eights.capacity() * size_of::<MonoBlock<8>>()
             + self.at.capacity() * size_of::<u32>()
     }
 
+    /// The numbers of blocks holding three channels and one colour.
+    #[cfg(test)]
+    pub(crate) fn kinds(&self) -> (usize, usize) {
+        (
+            self.fours.len() + self.eights.len(),
+            self.mono_fours.len() + self.mono_eights.len(),
+        )
+    }
+
     /// The first node whose children's block does not hold exactly what
-    /// [`NodeGroups::new`] makes of `nodes`.
-    pub(crate) fn first_mismatch(&self, nodes: &[Node]) -> Option<usize> {
-        let fresh = Self::new(nodes);
+    /// [`NodeGroups::new`] makes of `nodes` and `lights`.
+    pub(crate) fn first_mismatch(&self, nodes: &[Node], lights: &[PointLight]) -> Option<usize> {
+        let fresh = Self::new(nodes, lights);
         if self.at != fresh.at {
             return Some(
                 self.at
@@ -197,6 +389,8 @@ impl NodeGroups {
         let same = |a: &Group<'_>, b: &Group<'_>| match (a, b) {
             (Group::Four(a), Group::Four(b)) => bits_equal(a, b),
             (Group::Eight(a), Group::Eight(b)) => bits_equal(a, b),
+            (Group::MonoFour(a), Group::MonoFour(b)) => bits_equal(a, b),
+            (Group::MonoEight(a), Group::MonoEight(b)) => bits_equal(a, b),
             _ => false,
         };
         (0..nodes.len()).find(|&i| match (self.children(i), fresh.children(i)) {
@@ -208,7 +402,10 @@ impl NodeGroups {
 }
 
 /// Whether two blocks hold the same bits.
-fn bits_equal<const N: usize>(a: &Block<N>, b: &Block<N>) -> bool {
+fn bits_equal<const N: usize, const R: usize, const M: usize>(
+    a: &Block<N, R, M>,
+    b: &Block<N, R, M>,
+) -> bool {
     a.norms == b.norms
         && a.rows
             .iter()
@@ -294,7 +491,7 @@ impl LightTree {
     /// Recomputes the node groups from the nodes (after a build or refit),
     /// on `pool`.
     pub(crate) fn fill_groups(&mut self, pool: Pool) {
-        self.groups.refill(&self.nodes, pool);
+        self.groups.refill(&self.nodes, &self.lights, pool);
     }
 }
 
@@ -307,20 +504,46 @@ mod tests {
 
     /// Every lane of every group holds its child's values, the box stored
     /// relative to the centroid contains every member, and the norms are
-    /// rounded up to half precision.
+    /// rounded up to half precision; the blocks of white lights, or of one
+    /// colour, hold one colour with its spreads, those of coloured ones do
+    /// not, and a scene of both has both.
     #[test]
     fn groups_hold_their_childrens_values() {
         let mut state = 5u64;
         let mut u = || crate::testing::uniform(&mut state);
-        // A flat scene (nodes of four children) and a solid one (eight).
-        for depth in [1e-3, 30.0] {
+        // A flat scene (nodes of four children) and a solid one (eight);
+        // coloured lights, white ones, and white ones with a coloured
+        // corner.
+        for (depth, colours) in [
+            (1e-3, 0),
+            (30.0, 0),
+            (1e-3, 1),
+            (30.0, 1),
+            (30.0, 2),
+            (30.0, 3),
+        ] {
             let lights: Vec<PointLight> = (0..3000)
                 .map(|_| {
                     let p = Vec3::new(u() * 900.0 + 1e4, u() * 30.0 - 15.0, u() * depth);
-                    PointLight::new(p, Vec3::new(u(), u(), u() * 0.1))
+                    let white = colours == 1 || (colours == 2 && p.x > 1e4 + 100.0);
+                    let colour = if white {
+                        Vec3::splat(u() * 3.0)
+                    } else if colours == 3 {
+                        Vec3::new(1.0, 0.55, 0.2) * (u() * 3.0)
+                    } else {
+                        Vec3::new(u(), u(), u() * 0.1)
+                    };
+                    PointLight::new(p, colour)
                 })
                 .collect();
             let tree = LightTree::build(&lights).unwrap();
+            let spreads = colour_spreads(tree.nodes(), tree.lights());
+            let (coloured, mono) = tree.groups.kinds();
+            match colours {
+                0 => assert_eq!(mono, 0),
+                1 | 3 => assert_eq!(coloured, 0),
+                _ => assert!(coloured > 0 && mono > coloured, "{coloured} {mono}"),
+            }
             let mut checked = [0; 2];
             for (index, parent) in tree.nodes().iter().enumerate() {
                 let Some(group) = tree.groups.children(index) else {
@@ -328,20 +551,45 @@ mod tests {
                     continue;
                 };
                 assert_eq!(
-                    matches!(group, Group::Four(_)),
+                    matches!(group, Group::Four(_) | Group::MonoFour(_)),
                     parent.children().len() <= 4
                 );
+                // One colour exactly where every child's spreads allow it.
+                let one_colour = spreads[parent.children()]
+                    .iter()
+                    .all(|s| s.iter().all(|&s| f64::from(s) <= MONO_SPREAD_MAX));
+                assert_eq!(
+                    matches!(group, Group::MonoFour(_) | Group::MonoEight(_)),
+                    one_colour
+                );
                 for (i, child) in tree.nodes()[parent.children()].iter().enumerate() {
-                    let (lane, norm) = match group {
-                        Group::Four(b) => (b.rows.map(|r| r[i]), b.norms.map(|r| r[i])),
-                        Group::Eight(b) => (b.rows.map(|r| r[i]), b.norms.map(|r| r[i])),
-                    };
+                    // A lane's rows, its norms, and the row of channel 0's
+                    // first second moment.
+                    let (lane, norm, covariances): (Vec<f32>, Vec<u16>, usize) = with_block!(group, b => (
+                        b.rows.iter().map(|r| r[i]).collect(),
+                        b.norms.iter().map(|r| r[i]).collect(),
+                        covariance_row_of(b, 0, 0),
+                    ));
+                    let mono = lane.len() == MONO_ROWS;
+                    let spread = spreads[parent.children().start + i];
+                    if mono {
+                        assert_eq!(lane[MONO_ROWS - 2..], spread);
+                        let white = colours == 1 || child.intensity.x == child.intensity.y;
+                        assert_eq!(spread == [1.0; 2], white, "{spread:?}");
+                        assert!(spread.iter().all(|&s| s <= 1.0 + 1e-6), "{spread:?}");
+                    }
+                    // Channel 1 (channel 0 of a one-colour block), and
+                    // channel 2's norms (channel 0's).
+                    let (k, n) = if mono { (0, 0) } else { (1, 2) };
                     assert_eq!(lane[RADIUS], child.radius);
                     assert_eq!(lane[CENTROID + 2], child.centroid.z);
-                    assert_eq!(lane[COVARIANCES + 6 + 4], child.channel_covariances[1][4]);
-                    assert_eq!(lane[OFFSETS + 3 + 2], child.channel_offsets[1].z);
-                    let q = child.harmonic_norms[1][2];
-                    let stored = widen_half(norm[3 * 2 + 1]);
+                    assert_eq!(
+                        lane[covariances + 6 * k + 4],
+                        child.channel_covariances[k][4]
+                    );
+                    assert_eq!(lane[OFFSETS + 3 * k + 2], child.channel_offsets[k].z);
+                    let q = child.harmonic_norms[1][n];
+                    let stored = widen_half(norm[3 * n + 1]);
                     assert!(stored >= q && stored <= q.max(6.2e-5) * (1.0 + 1.0 / 1024.0));
                     for light in &tree.lights()[child.lights()] {
                         for axis in 0..3 {
@@ -351,12 +599,26 @@ mod tests {
                             assert!(f64::from(lane[BOX_HIGH + axis]) >= rel);
                         }
                     }
-                    checked[usize::from(matches!(group, Group::Eight(..)))] += 1;
+                    checked
+                        [usize::from(matches!(group, Group::Eight(..) | Group::MonoEight(..)))] +=
+                        1;
                 }
             }
             assert!(checked.iter().sum::<usize>() > 100, "{checked:?}");
-            assert_eq!(tree.groups.first_mismatch(tree.nodes()), None);
+            assert_eq!(
+                tree.groups.first_mismatch(tree.nodes(), tree.lights()),
+                None
+            );
         }
+    }
+
+    /// [`Block::covariance_row`] of `block`'s kind.
+    fn covariance_row_of<const N: usize, const R: usize, const M: usize>(
+        _: &Block<N, R, M>,
+        k: usize,
+        e: usize,
+    ) -> usize {
+        Block::<N, R, M>::covariance_row(k, e)
     }
 
     /// `half_up` rounds every `f32` in `[0, 65504]` up to a half-precision

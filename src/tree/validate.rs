@@ -150,7 +150,7 @@ impl LightTree {
         if leaf_cover != n {
             return Err(ValidationError::BadCover);
         }
-        if let Some(node) = self.groups.first_mismatch(&self.nodes) {
+        if let Some(node) = self.groups.first_mismatch(&self.nodes, &self.lights) {
             return Err(ValidationError::MomentMismatch { node });
         }
         Ok(())

@@ -81,9 +81,30 @@ pub fn clustered_lights(max: usize) -> impl Strategy<Value = Vec<PointLight>> {
         })
 }
 
-/// Either layout.
+/// Lights of either layout, all of one colour (white, or with channels
+/// sometimes exactly 0) scaled by factors spanning six decades: the tree
+/// keeps one channel's moments for them.
+pub fn one_colour_lights(max: usize) -> impl Strategy<Value = Vec<PointLight>> {
+    let colour = prop_oneof![1 => Just(Vec3::ONE), 3 => intensity().prop_map(|i| i / i.max_element().max(1e-30))];
+    (
+        prop_oneof![uniform_lights(max), clustered_lights(max)],
+        colour,
+    )
+        .prop_map(|(lights, colour)| {
+            lights
+                .into_iter()
+                .map(|l| PointLight::new(l.position, colour * l.intensity.max_element()))
+                .collect()
+        })
+}
+
+/// Either layout, with lights of many colours or of one.
 pub fn lights(max: usize) -> impl Strategy<Value = Vec<PointLight>> {
-    prop_oneof![uniform_lights(max), clustered_lights(max)]
+    prop_oneof![
+        2 => uniform_lights(max),
+        2 => clustered_lights(max),
+        1 => one_colour_lights(max)
+    ]
 }
 
 /// A threshold of each kind.
