@@ -938,10 +938,16 @@ macro_rules! fill_node_body {
         match kids {
             None => $out.set_to_lights(&$lights[members], c, $scratch),
             Some(kids) => {
-                $out.clear();
-                for (k, kid) in children.zip(kids.iter_mut()) {
+                // The first child's shifted moments are written, the others'
+                // added: no clearing of `$out` (the same bits, see
+                // `Moments::shift_to`).
+                for (j, (k, kid)) in children.zip(kids.iter_mut()).enumerate() {
                     let t = $levels.node($depth + 1, k).centroid.as_dvec3() - c;
-                    kid.shift_into(t, $out);
+                    if j == 0 {
+                        kid.shift_to(t, $out);
+                    } else {
+                        kid.shift_into(t, $out);
+                    }
                 }
             }
         }

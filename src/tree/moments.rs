@@ -559,17 +559,29 @@ impl Moments {
         }
     }
 
-    /// Sets every moment and bound to 0.
-    #[inline(always)]
-    pub(crate) fn clear(&mut self) {
-        *self = Self::ZERO;
-    }
-
     /// Adds these moments, taken about a centre `c'`, shifted to a centre
     /// `c` with `t = c' - c` (so `x - c = (x - c') + t`), into `sum`; the
     /// moments themselves are left shifted, their bounds unchanged.
     #[inline(always)]
     pub(crate) fn shift_into(&mut self, t: DVec3, sum: &mut Self) {
+        self.shift::<true>(t, sum);
+    }
+
+    /// [`shift_into`](Self::shift_into) a sum of zeros: sets `sum` to these
+    /// moments shifted, with their bounds through the kernel, without
+    /// clearing it first (a node's first child). The same bits as clearing
+    /// `sum` and adding: every moment and bound is a sum of terms that
+    /// starts from `+0`, so it is never `-0` (a rounded sum is `-0` only
+    /// when both its terms are), and `+0 + x` is `x` for any other `x`.
+    #[inline(always)]
+    pub(crate) fn shift_to(&mut self, t: DVec3, sum: &mut Self) {
+        self.shift::<false>(t, sum);
+    }
+
+    /// [`shift_into`](Self::shift_into) if `ADD`, else
+    /// [`shift_to`](Self::shift_to).
+    #[inline(always)]
+    fn shift<const ADD: bool>(&mut self, t: DVec3, sum: &mut Self) {
         let m = &mut self.m;
         for (axis, tv) in t.to_array().into_iter().enumerate() {
             if tv == 0.0 {
@@ -582,10 +594,14 @@ impl Moments {
                 _ => shift_along_z(m, &w),
             }
         }
-        for (acc, v) in sum.m.iter_mut().zip(m.iter()) {
-            for (a, b) in acc.iter_mut().zip(v) {
-                *a += b;
+        if ADD {
+            for (acc, v) in sum.m.iter_mut().zip(m.iter()) {
+                for (a, b) in acc.iter_mut().zip(v) {
+                    *a += b;
+                }
             }
+        } else {
+            sum.m = *m;
         }
         // The bounds through the kernel w_j = tau^j / j!.
         let tau = (t.x.abs() + t.y.abs() + t.z.abs()) * (1.0 + 4.0 * f64::EPSILON);
@@ -601,8 +617,13 @@ impl Moments {
                 mul_add(&mut err, &e, w[l - k]);
             }
             for ch in 0..4 {
-                sum.abs[l][ch] += abs[ch] * grow * grow;
-                sum.err[l][ch] += err[ch] * grow * grow;
+                let (abs, err) = (abs[ch] * grow * grow, err[ch] * grow * grow);
+                if ADD {
+                    sum.abs[l][ch] += abs;
+                    sum.err[l][ch] += err;
+                } else {
+                    (sum.abs[l][ch], sum.err[l][ch]) = (abs, err);
+                }
             }
         }
     }
