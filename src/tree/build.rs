@@ -389,12 +389,95 @@ fn check_and_bound(lights: &[PointLight], pool: Pool) -> Result<Aabb, BuildError
         .try_fold(Aabb::EMPTY, |b, part| Ok(b.union(part?)))
 }
 
+/// Lights [`bound_part`] reads at once: their positions and intensities,
+/// 24 values, as six vectors of four.
+const BOUND_LIGHTS: usize = 4;
+
 /// The box of `lights` and whether every light passes [`check_range`],
 /// without a branch per light: a coordinate passes when its magnitude is
 /// at most [`PointLight::MAX_COORDINATE`] (false for NaN and infinities),
 /// an intensity channel when it lies in `[0, f32::MAX]` (false for NaN,
 /// infinities and negative values; `-0` passes, as there).
+///
+/// [`BOUND_LIGHTS`] lights at a time, as one array of their 24 values
+/// (which the compiler keeps as six vectors): per value, its smallest and
+/// largest so far, and whether some value was NaN. Every value passes when
+/// there was no NaN and each value's extremes lie in its range; the box is
+/// the positions' extremes. The lights left over are taken one by one.
+/// The same box as light by light but perhaps for the sign of a zero
+/// bound (`-0` and `0` compare equal, and which of them a minimum keeps
+/// depends on the order), which the Morton grid over the box does not
+/// see. Measured with callgrind (the street city, 10^6 lights): 11
+/// instructions a light, against 44 light by light.
 fn bound_part(lights: &[PointLight]) -> (Aabb, bool) {
+    const VALUES: usize = 6 * BOUND_LIGHTS;
+    // Per value of a group, the ends of its range.
+    const LOW: [f32; VALUES] = {
+        let mut out = [0.0; VALUES];
+        let mut k = 0;
+        while k < VALUES {
+            out[k] = if k % 6 < 3 {
+                -PointLight::MAX_COORDINATE
+            } else {
+                0.0
+            };
+            k += 1;
+        }
+        out
+    };
+    const HIGH: [f32; VALUES] = {
+        let mut out = [0.0; VALUES];
+        let mut k = 0;
+        while k < VALUES {
+            out[k] = if k % 6 < 3 {
+                PointLight::MAX_COORDINATE
+            } else {
+                f32::MAX
+            };
+            k += 1;
+        }
+        out
+    };
+    let mut lo = [f32::INFINITY; VALUES];
+    let mut hi = [f32::NEG_INFINITY; VALUES];
+    let mut nan = [0u32; 4];
+    let groups = lights.chunks_exact(BOUND_LIGHTS);
+    let rest = groups.remainder();
+    for group in groups {
+        let mut v = [0.0f32; VALUES];
+        for (v, l) in v.chunks_exact_mut(6).zip(group) {
+            v[..3].copy_from_slice(&l.position.to_array());
+            v[3..].copy_from_slice(&l.intensity.to_array());
+        }
+        // Four lanes at a time, so that the NaN flags are one vector.
+        for q in 0..VALUES / 4 {
+            for (k, nan) in nan.iter_mut().enumerate() {
+                let i = 4 * q + k;
+                let x = v[i];
+                // As `Vec3::min` and `Vec3::max` compare (a NaN is not
+                // kept: the flags see it).
+                lo[i] = if lo[i] < x { lo[i] } else { x };
+                hi[i] = if hi[i] > x { hi[i] } else { x };
+                *nan |= u32::from(x.is_nan());
+            }
+        }
+    }
+    let (mut aabb, mut valid) = bound_each(rest);
+    for (lo, hi) in lo.chunks_exact(6).zip(hi.chunks_exact(6)) {
+        aabb = aabb.union(Aabb {
+            min: Vec3::from_slice(&lo[..3]),
+            max: Vec3::from_slice(&hi[..3]),
+        });
+    }
+    valid &= nan == [0; 4];
+    for i in 0..VALUES {
+        valid &= lo[i] >= LOW[i] && hi[i] <= HIGH[i];
+    }
+    (aabb, valid)
+}
+
+/// [`bound_part`] light by light.
+fn bound_each(lights: &[PointLight]) -> (Aabb, bool) {
     let max = Vec3::splat(PointLight::MAX_COORDINATE);
     let mut aabb = Aabb::EMPTY;
     let mut valid = true;
@@ -938,10 +1021,16 @@ macro_rules! fill_node_body {
         match kids {
             None => $out.set_to_lights(&$lights[members], c, $scratch),
             Some(kids) => {
-                $out.clear();
-                for (k, kid) in children.zip(kids.iter_mut()) {
+                // The first child's shifted moments are written, the others'
+                // added: no clearing of `$out` (the same bits, see
+                // `Moments::shift_to`).
+                for (j, (k, kid)) in children.zip(kids.iter_mut()).enumerate() {
                     let t = $levels.node($depth + 1, k).centroid.as_dvec3() - c;
-                    kid.shift_into(t, $out);
+                    if j == 0 {
+                        kid.shift_to(t, $out);
+                    } else {
+                        kid.shift_into(t, $out);
+                    }
                 }
             }
         }
@@ -1150,11 +1239,14 @@ mod tests {
 mod checks {
     use glam::Vec3;
 
-    use super::{bound_part, check_range};
+    use super::{bound_each, bound_part, check_range};
     use crate::PointLight;
 
     /// The branch-free check accepts exactly the lights that the checks
-    /// one by one accept, on the edges of each condition.
+    /// one by one accept, on the edges of each condition, the light at
+    /// every place of a group of lights read at once and among the lights
+    /// left over; and its box is the box light by light (up to the sign
+    /// of a zero bound).
     #[test]
     fn the_fast_check_accepts_what_the_checks_accept() {
         let max = PointLight::MAX_COORDINATE;
@@ -1186,12 +1278,23 @@ mod checks {
                     let mut light = PointLight::new(Vec3::ONE, Vec3::ONE);
                     light.position[axis] = c;
                     light.intensity[(axis + a + b) % 3] = i;
-                    let lights = [PointLight::default(), light];
-                    assert_eq!(
-                        bound_part(&lights).1,
-                        check_range(&lights).is_ok(),
-                        "coordinate {c}, channel {i}"
-                    );
+                    for len in 1..=9 {
+                        for at in 0..len {
+                            let mut lights: Vec<PointLight> = (0..len)
+                                .map(|k| PointLight::new(Vec3::splat(k as f32 - 2.0), Vec3::ONE))
+                                .collect();
+                            lights[at] = light;
+                            let (aabb, valid) = bound_part(&lights);
+                            assert_eq!(
+                                valid,
+                                check_range(&lights).is_ok(),
+                                "coordinate {c}, channel {i}, light {at} of {len}"
+                            );
+                            if valid {
+                                assert_eq!(aabb, bound_each(&lights).0);
+                            }
+                        }
+                    }
                 }
             }
         }

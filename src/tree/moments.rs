@@ -559,17 +559,29 @@ impl Moments {
         }
     }
 
-    /// Sets every moment and bound to 0.
-    #[inline(always)]
-    pub(crate) fn clear(&mut self) {
-        *self = Self::ZERO;
-    }
-
     /// Adds these moments, taken about a centre `c'`, shifted to a centre
     /// `c` with `t = c' - c` (so `x - c = (x - c') + t`), into `sum`; the
     /// moments themselves are left shifted, their bounds unchanged.
     #[inline(always)]
     pub(crate) fn shift_into(&mut self, t: DVec3, sum: &mut Self) {
+        self.shift::<true>(t, sum);
+    }
+
+    /// [`shift_into`](Self::shift_into) a sum of zeros: sets `sum` to these
+    /// moments shifted, with their bounds through the kernel, without
+    /// clearing it first (a node's first child). The same bits as clearing
+    /// `sum` and adding: every moment and bound is a sum of terms that
+    /// starts from `+0`, so it is never `-0` (a rounded sum is `-0` only
+    /// when both its terms are), and `+0 + x` is `x` for any other `x`.
+    #[inline(always)]
+    pub(crate) fn shift_to(&mut self, t: DVec3, sum: &mut Self) {
+        self.shift::<false>(t, sum);
+    }
+
+    /// [`shift_into`](Self::shift_into) if `ADD`, else
+    /// [`shift_to`](Self::shift_to).
+    #[inline(always)]
+    fn shift<const ADD: bool>(&mut self, t: DVec3, sum: &mut Self) {
         let m = &mut self.m;
         for (axis, tv) in t.to_array().into_iter().enumerate() {
             if tv == 0.0 {
@@ -582,10 +594,14 @@ impl Moments {
                 _ => shift_along_z(m, &w),
             }
         }
-        for (acc, v) in sum.m.iter_mut().zip(m.iter()) {
-            for (a, b) in acc.iter_mut().zip(v) {
-                *a += b;
+        if ADD {
+            for (acc, v) in sum.m.iter_mut().zip(m.iter()) {
+                for (a, b) in acc.iter_mut().zip(v) {
+                    *a += b;
+                }
             }
+        } else {
+            sum.m = *m;
         }
         // The bounds through the kernel w_j = tau^j / j!.
         let tau = (t.x.abs() + t.y.abs() + t.z.abs()) * (1.0 + 4.0 * f64::EPSILON);
@@ -601,8 +617,13 @@ impl Moments {
                 mul_add(&mut err, &e, w[l - k]);
             }
             for ch in 0..4 {
-                sum.abs[l][ch] += abs[ch] * grow * grow;
-                sum.err[l][ch] += err[ch] * grow * grow;
+                let (abs, err) = (abs[ch] * grow * grow, err[ch] * grow * grow);
+                if ADD {
+                    sum.abs[l][ch] += abs;
+                    sum.err[l][ch] += err;
+                } else {
+                    (sum.abs[l][ch], sum.err[l][ch]) = (abs, err);
+                }
             }
         }
     }
@@ -631,22 +652,7 @@ impl Moments {
         let mut scales = [ZERO; 3];
         let mut squares = [ZERO; 3];
         if r > 0.0 {
-            // Four rows at a time, each into a register of its own: the
-            // rows' sums are independent chains, each term added in order
-            // of its monomial (the padding adds exact zeros after them).
-            for (c, blocks) in harmonics.iter_mut().zip(&tables.rows) {
-                for (outs, steps) in c.chunks_mut(ROW_BLOCK).zip(blocks) {
-                    let mut acc = [ZERO; ROW_BLOCK];
-                    for step in steps {
-                        for (acc, &(n, w)) in acc.iter_mut().zip(step) {
-                            mul_add(acc, &self.m[usize::from(n)], w);
-                        }
-                    }
-                    for (out, acc) in outs.iter_mut().zip(acc) {
-                        *out = acc;
-                    }
-                }
-            }
+            harmonic_moments(&self.m, &tables.weights, &mut harmonics);
             let mut power = [0.0; 4];
             for ch in 0..3 {
                 power[ch] = intensity[ch] * r * r;
@@ -733,25 +739,82 @@ pub(crate) struct Statistics {
     pub(crate) moment_error: f32,
 }
 
-/// Rows of [`HarmonicTables`] summed side by side.
-const ROW_BLOCK: usize = 4;
+/// Non-zero weights of the harmonics of degrees 3 to 5 in the scaled
+/// moments: 16, 28 and 46 of them.
+const HARMONIC_TERMS: usize = 90;
 
-/// A block of rows as steps: per step, each row's `(monomial, weight)`.
-type RowBlock = Vec<[(u8, f64); ROW_BLOCK]>;
+/// The harmonic moments as straight-line code: per harmonic (its degree
+/// `d` from 3, its row `r` within the degree, as [`solid_harmonics`]
+/// orders them) its terms `(a, k)`: the monomial `a` of each non-zero
+/// weight, by increasing `a`, and the weight's place `k` in
+/// [`HarmonicTables::weights`]. [`HARMONIC_TABLES`] checks the lists
+/// against the harmonics' expansion when it builds the weights.
+///
+/// [`solid_harmonics`]: super::build::solid_harmonics
+macro_rules! harmonic_rows {
+    ($(($d:literal, $r:literal): [$(($a:literal, $k:literal)),*]),*) => {
+        /// The harmonic moments (unscaled) of the moments `m`, into `out`
+        /// per degree and row (rows past a degree's `2l + 1` untouched):
+        /// each row's terms fused-multiply-added in order of their
+        /// monomials into a sum from 0, an independent chain per row.
+        #[inline(always)]
+        fn harmonic_moments(
+            m: &[Lanes; MONOMIALS],
+            w: &[f64; HARMONIC_TERMS],
+            out: &mut [[Lanes; 11]; 3],
+        ) {
+            $({
+                let mut acc = ZERO;
+                $(mul_add(&mut acc, &m[$a], w[$k]);)*
+                out[$d][$r] = acc;
+            })*
+        }
+
+        /// Per harmonic, its degree (from 3), row and terms `(a, k)`, as
+        /// [`harmonic_moments`] sums them.
+        const HARMONIC_ROWS: &[(usize, usize, &[(usize, usize)])] =
+            &[$(($d, $r, &[$(($a, $k)),*])),*];
+    };
+}
+
+harmonic_rows!(
+    (0, 0): [(12, 0), (17, 1), (19, 2)],
+    (0, 1): [(10, 3), (13, 4), (15, 5)],
+    (0, 2): [(11, 6), (16, 7), (18, 8)],
+    (0, 3): [(12, 9), (17, 10)],
+    (0, 4): [(14, 11)],
+    (0, 5): [(10, 12), (13, 13)],
+    (0, 6): [(11, 14), (16, 15)],
+    (1, 0): [(20, 16), (23, 17), (25, 18), (30, 19), (32, 20), (34, 21)],
+    (1, 1): [(22, 22), (27, 23), (29, 24)],
+    (1, 2): [(24, 25), (31, 26), (33, 27)],
+    (1, 3): [(20, 28), (25, 29), (30, 30), (32, 31)],
+    (1, 4): [(21, 32), (26, 33), (28, 34)],
+    (1, 5): [(22, 35), (27, 36)],
+    (1, 6): [(24, 37), (31, 38)],
+    (1, 7): [(20, 39), (23, 40), (30, 41)],
+    (1, 8): [(21, 42), (26, 43)],
+    (2, 0): [(37, 44), (42, 45), (44, 46), (51, 47), (53, 48), (55, 49)],
+    (2, 1): [(35, 50), (38, 51), (40, 52), (45, 53), (47, 54), (49, 55)],
+    (2, 2): [(36, 56), (41, 57), (43, 58), (50, 59), (52, 60), (54, 61)],
+    (2, 3): [(37, 62), (44, 63), (51, 64), (53, 65)],
+    (2, 4): [(39, 66), (46, 67), (48, 68)],
+    (2, 5): [(35, 69), (38, 70), (40, 71), (45, 72), (47, 73)],
+    (2, 6): [(36, 74), (41, 75), (43, 76), (50, 77), (52, 78)],
+    (2, 7): [(37, 79), (42, 80), (51, 81)],
+    (2, 8): [(39, 82), (46, 83)],
+    (2, 9): [(35, 84), (38, 85), (45, 86)],
+    (2, 10): [(36, 87), (41, 88), (50, 89)]
+);
 
 /// The Schmidt semi-normalised solid harmonics of degrees 3 to 5 as
 /// linear forms in the scaled moments.
 struct HarmonicTables {
-    /// Per degree 3 to 5 and harmonic `j` of the degree, the non-zero
-    /// weights `N_j P_(j,a) a!` as `(a, weight)` by increasing `a`, with
-    /// `P_(j,a)` the coefficient of `y^a` in the unnormalised harmonic `j`
-    /// and `N_j` its normalisation.
-    ///
-    /// The rows come in blocks of [`ROW_BLOCK`], a block as steps that
-    /// give each of its rows its next term, rows shorter than the block's
-    /// longest (and the rows that fill the degree's last block) padded
-    /// with weights 0 after their own terms.
-    rows: [Vec<RowBlock>; 3],
+    /// The non-zero weights `N_j P_(j,a) a!` of each harmonic `j` (by
+    /// degree, then row) in monomial `a`, by increasing `a`, as
+    /// [`harmonic_moments`] takes them, with `P_(j,a)` the coefficient of
+    /// `y^a` in the unnormalised harmonic `j` and `N_j` its normalisation.
+    weights: [f64; HARMONIC_TERMS],
     /// Per degree: `sqrt(sum_j max_a |weight_ja|^2)` (widened by a relative
     /// `2^-40`), so that the harmonic moments' error vector has norm at most
     /// this times the summed error of the degree's moments.
@@ -790,34 +853,26 @@ static HARMONIC_TABLES: LazyLock<HarmonicTables> = LazyLock::new(|| {
     for g in &mut error_gain {
         *g = g.sqrt() * (1.0 + 2f64.powi(-40));
     }
-    let rows = [3, 4, 5].map(|l| {
-        let rows: Vec<Vec<(u8, f64)>> = weights[harmonic_offset(l)..harmonic_offset(l) + 2 * l + 1]
-            .iter()
-            .map(|row| {
-                (row.iter().enumerate())
-                    .filter(|&(_, &w)| w != 0.0)
-                    .map(|(n, &w)| (n as u8, w))
-                    .collect()
-            })
-            .collect();
-        rows.chunks(ROW_BLOCK)
-            .map(|block| {
-                let steps = block.iter().map(Vec::len).max().unwrap_or(0);
-                (0..steps)
-                    .map(|k| {
-                        core::array::from_fn(|r| {
-                            block
-                                .get(r)
-                                .and_then(|row| row.get(k))
-                                .copied()
-                                .unwrap_or((0, 0.0))
-                        })
-                    })
-                    .collect()
-            })
-            .collect()
-    });
-    HarmonicTables { rows, error_gain }
+    // The weights in the order of the straight-line rows, which must list
+    // exactly each harmonic's non-zero weights.
+    let mut flat = [0.0; HARMONIC_TERMS];
+    let mut taken = 0;
+    for (j, &(d, r, terms)) in HARMONIC_ROWS.iter().enumerate() {
+        assert_eq!(harmonic_offset(d + 3) + r, j, "rows in order");
+        let nonzero: Vec<usize> = (0..MONOMIALS).filter(|&a| weights[j][a] != 0.0).collect();
+        let listed: Vec<usize> = terms.iter().map(|&(a, _)| a).collect();
+        assert_eq!(nonzero, listed, "harmonic {j}: its non-zero weights");
+        for &(a, k) in terms {
+            assert_eq!(k, taken, "weights in order");
+            flat[k] = weights[j][a];
+            taken += 1;
+        }
+    }
+    assert_eq!(taken, HARMONIC_TERMS);
+    HarmonicTables {
+        weights: flat,
+        error_gain,
+    }
 });
 
 const FACTORIALS: [f64; DEGREE + 1] = [1.0, 1.0, 2.0, 6.0, 24.0, 120.0];
