@@ -210,9 +210,12 @@ impl<const N: usize, const R: usize, const M: usize> Block<N, R, M> {
 /// upper bound, rounded up to `f32`, on `max_i r_i / min_i r_i` with `r_i =
 /// I_k,i / I_0,i` over the members with some intensity; exactly 1 where
 /// every `r_i` is 1 (white or grey lights) or where channel `k` is 0 in
-/// every member; infinity where a member has some intensity but none in
-/// channel 0, or none in channel `k` while another has some. Computed from
-/// the leaves up (children follow their parents), one read of the lights.
+/// every member; infinity where a member has some intensity in channel `k`
+/// but none in channel 0, or none in channel `k` while another has some
+/// (members with nothing in either are passed over: they add nothing to
+/// either sum). Spreads above [`MONO_SPREAD_MAX`] are only known to be
+/// above it: a leaf's lights are read until its spread passes it. Computed
+/// from the leaves up (children follow their parents).
 ///
 /// A channel's Lambert sum over a node of spread `s` is within a factor
 /// `s` of channel 0's scaled to channel `k`'s total: every term is at
@@ -230,18 +233,28 @@ pub(crate) fn colour_spreads(nodes: &[Node], lights: &[PointLight]) -> Vec<[f32;
             range[k] = (range[k].0.min(low), range[k].1.max(high));
         };
         if node.is_leaf() {
+            // Without branches: a member with nothing in channel 0 has a
+            // ratio of infinity where it has something in channel k, and
+            // NaN (0 / 0, which fails both comparisons) where it has
+            // nothing there either, adding 0 to both channels' sums.
             for light in lights.get(node.lights()).unwrap_or(&[]) {
                 let i = light.intensity.as_dvec3();
-                if i == glam::DVec3::ZERO {
-                    continue;
+                for (k, range) in range.iter_mut().enumerate() {
+                    let r = i[k + 1] / i.x;
+                    // One minimum and one maximum instruction each.
+                    #[allow(clippy::manual_clamp)]
+                    {
+                        range.0 = if r < range.0 { r } else { range.0 };
+                        range.1 = if r > range.1 { r } else { range.1 };
+                    }
                 }
-                for k in 0..2 {
-                    let r = if i.x > 0.0 {
-                        i[k + 1] / i.x
-                    } else {
-                        f64::INFINITY
-                    };
-                    widen(&mut range, k, (r, r));
+                // A leaf of many colours is settled (and so are its
+                // ancestors): the rest of its lights are not read.
+                if range
+                    .iter()
+                    .any(|&(low, high)| high > low * MONO_SPREAD_MAX)
+                {
+                    break;
                 }
             }
         } else {
