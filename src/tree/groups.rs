@@ -15,7 +15,7 @@
 //! on `max_i r_i / min_i r_i` with `r_i = I_k,i / I_0,i` (see
 //! [`colour_spreads`]). That is half the bytes, and a third of the
 //! per-channel work for its readers, which bound channel `k` from channel
-//! 0 (see [`lane_bounds`](crate::lambert)'s module). White or grey lights
+//! 0 (the argument is in `lambert::group`'s docs). White or grey lights
 //! have a spread of exactly 1, and their readers' results are the very
 //! bits they would have computed from three channels (the moments are
 //! computed channel by channel with the same operations, so equal
