@@ -448,9 +448,9 @@ pub(crate) fn remainder<T: Real, const N: usize, const R: usize, const M: usize>
 }
 
 /// The bounds of a block's lanes (see the module docs), each end in `f64`
-/// units of radiance: the `f32` interval times `I_k kd_k / D^2`. A grey
-/// block's one channel stands for all three (the same bits as from three
-/// copies of it).
+/// units of radiance: the `f32` interval times `I_k kd_k / D^2`. A
+/// one-colour block's channel 0 stands for the others, widened by their
+/// colour spreads (module docs, *One colour*).
 #[inline(always)]
 pub(crate) fn lane_bounds<const N: usize, const R: usize, const M: usize>(
     block: &Block<N, R, M>,
@@ -541,27 +541,28 @@ pub(crate) fn lane_bounds<const N: usize, const R: usize, const M: usize>(
     let mut lower = [[0.0; N]; 3];
     let mut upper = [[0.0; N]; 3];
     let mut estimate = [[0.0; N]; 3];
+    // Per stored channel, the interval's ends in units with the point's
+    // and the moments' allowances. Both intervals contain the exact value;
+    // if rounding beyond the allowances ever made them disjoint, the
+    // paper's holds.
+    let mut ends = [(Wide::of(0.0), Wide::of(0.0)); 3];
+    for (c, ends) in ends.iter_mut().enumerate().take(Block::<N, R, M>::CHANNELS) {
+        let a = Wide::select_ge(zero, disjoint, lo[c], lower_paper).widen();
+        let b = Wide::select_ge(zero, disjoint, hi[c], upper_paper).widen();
+        *ends = (a - point64 - sums, b + point64 + sums);
+    }
     for k in 0..3 {
         // A one-colour block's channel 0 stands for the others.
         let c = k.min(Block::<N, R, M>::CHANNELS - 1);
-        // Both intervals contain the exact value; if rounding beyond the
-        // allowances ever made them disjoint, the paper's holds.
-        let a = Wide::select_ge(zero, disjoint, lo[c], lower_paper).widen();
-        let b = Wide::select_ge(zero, disjoint, hi[c], upper_paper).widen();
+        let (a, b) = ends[c];
         let scale = Wide(scales.intensity[k]) * inv_d2_64;
         let (l, h) = if c == k {
-            (
-                (a - point64 - sums) * scale * down,
-                (b + point64 + sums) * scale * up,
-            )
+            (a * scale * down, b * scale * up)
         } else {
             // Channel 0's interval, divided and multiplied by the colour's
             // spread (exactly 1 for white lights: the same bits as above).
             let spread = row::<f32, N, R, M>(block, Block::<N, R, M>::spread_row(k)).widen();
-            (
-                (a - point64 - sums) * scale / spread * down,
-                (b + point64 + sums) * scale * spread * up,
-            )
+            (a * scale / spread * down, b * scale * spread * up)
         };
         let l = l.max(Wide::of(0.0));
         lower[k] = l.0;
@@ -744,7 +745,7 @@ mod tests {
         let mut state = 17u64;
         let mut u = move || f64::from(uniform(&mut state));
         let mut worst = Worst::default();
-        let mut greys = 0;
+        let mut monos = 0;
         for scene in 0..40 {
             let shape = scene % 4;
             let centre =
@@ -759,7 +760,7 @@ mod tests {
                         2 => DVec3::new(a.x, 1e-4 * a.y, 1e-4 * a.z),
                         _ => a.normalize_or_zero(),
                     };
-                    // Every fifth scene white: grey blocks.
+                    // Every fifth scene white: one-colour blocks.
                     let colour = if scene % 5 == 4 {
                         Vec3::splat(u() as f32)
                     } else {
@@ -794,11 +795,11 @@ mod tests {
                         _ => (uh + side * 0.3 * (u() - 0.5)).normalize(),
                     };
                     with_block!(group, block => check_lane(block, lane, point, normal, &mut worst));
-                    greys += usize::from(matches!(group, Group::MonoFour(_) | Group::MonoEight(_)));
+                    monos += usize::from(matches!(group, Group::MonoFour(_) | Group::MonoEight(_)));
                 }
             }
         }
-        assert!(worst.lanes > 2000 && greys > 200, "{greys} {worst:?}");
+        assert!(worst.lanes > 2000 && monos > 200, "{monos} {worst:?}");
         for (what, r) in [
             ("sigma", worst.sigma),
             ("offsets", worst.offsets),

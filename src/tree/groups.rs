@@ -229,24 +229,23 @@ pub(crate) fn colour_spreads(nodes: &[Node], lights: &[PointLight]) -> Vec<[f32;
     for index in (0..nodes.len()).rev() {
         let node = &nodes[index];
         let mut range = [(f64::INFINITY, 0.0f64); 2];
-        let widen = |range: &mut [(f64, f64); 2], k: usize, (low, high): (f64, f64)| {
-            range[k] = (range[k].0.min(low), range[k].1.max(high));
-        };
+        // Widens `range` to hold `[low, high]`: one minimum and one maximum
+        // instruction, a NaN end failing its comparison and passed over.
+        #[allow(clippy::manual_clamp)]
+        fn widen(range: &mut (f64, f64), (low, high): (f64, f64)) {
+            range.0 = if low < range.0 { low } else { range.0 };
+            range.1 = if high > range.1 { high } else { range.1 };
+        }
         if node.is_leaf() {
             // Without branches: a member with nothing in channel 0 has a
             // ratio of infinity where it has something in channel k, and
-            // NaN (0 / 0, which fails both comparisons) where it has
-            // nothing there either, adding 0 to both channels' sums.
+            // NaN (0 / 0) where it has nothing there either, adding 0 to
+            // both channels' sums.
             for light in lights.get(node.lights()).unwrap_or(&[]) {
                 let i = light.intensity.as_dvec3();
                 for (k, range) in range.iter_mut().enumerate() {
                     let r = i[k + 1] / i.x;
-                    // One minimum and one maximum instruction each.
-                    #[allow(clippy::manual_clamp)]
-                    {
-                        range.0 = if r < range.0 { r } else { range.0 };
-                        range.1 = if r > range.1 { r } else { range.1 };
-                    }
+                    widen(range, (r, r));
                 }
                 // A leaf of many colours is settled (and so are its
                 // ancestors): the rest of its lights are not read.
@@ -259,8 +258,8 @@ pub(crate) fn colour_spreads(nodes: &[Node], lights: &[PointLight]) -> Vec<[f32;
             }
         } else {
             for child in node.children() {
-                for (k, &child_range) in ranges[child].iter().enumerate() {
-                    widen(&mut range, k, child_range);
+                for (range, &child_range) in range.iter_mut().zip(&ranges[child]) {
+                    widen(range, child_range);
                 }
             }
         }
@@ -321,11 +320,16 @@ impl NodeGroups {
                 (true, true) => (&mut mono_fours, MONO),
                 (false, true) => (&mut mono_eights, EIGHT | MONO),
             };
-            list.push(index);
-            // Node counts fit in `u32`, and so do block counts (fewer; at
-            // most 2^29 blocks of each kind for the flags, with at least
-            // two children each against at most 2^32 nodes).
-            at[index] = (list.len() - 1) as u32 | flags;
+            // A block's index takes the table's 30 low bits (below all ones,
+            // which with both flags would read as `NO_BLOCK`). A node past
+            // them (over 2^30 - 1 blocks of one kind, some 350 GB of them)
+            // keeps `NO_BLOCK`: it is bounded child by child.
+            if let Ok(i) = u32::try_from(list.len())
+                && i < MONO - 1
+            {
+                at[index] = i | flags;
+                list.push(index);
+            }
         }
         fn block<const N: usize, const R: usize, const M: usize>(
             nodes: &[Node],
@@ -587,6 +591,17 @@ mod tests {
                     let spread = spreads[parent.children().start + i];
                     if mono {
                         assert_eq!(lane[MONO_ROWS - 2..], spread);
+                        // At least the largest over the smallest ratio
+                        // of channel k + 1 to channel 0 of its lights.
+                        for (k, &spread) in spread.iter().enumerate() {
+                            let (low, high) = tree.lights()[child.lights()]
+                                .iter()
+                                .map(|l| f64::from(l.intensity[k + 1]) / f64::from(l.intensity.x))
+                                .fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r), b.max(r)));
+                            if high > 0.0 {
+                                assert!(f64::from(spread) >= high / low, "{spread} {high} {low}");
+                            }
+                        }
                         let white = colours == 1 || child.intensity.x == child.intensity.y;
                         assert_eq!(spread == [1.0; 2], white, "{spread:?}");
                         assert!(spread.iter().all(|&s| s <= 1.0 + 1e-6), "{spread:?}");
