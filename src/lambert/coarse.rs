@@ -16,28 +16,30 @@
 //! * the height `h = (n_x d_x + n_y d_y) + n_z d_z`: each product within
 //!   `3u` of `n_j d_j`, the two sums `2u` more of the magnitudes, so
 //!   within `5.001 u D` of the exact height (`sum_j |n_j d_j| <= D`);
-//! * `d2 = (d_x^2 + d_y^2) + d_z^2` within `5.001 u D^2`; `s = sqrt(d2)`
-//!   within `3.502 u D`; `q = d2 s` within `9.51 u D^3`;
-//! * `w = max(h / q, 0)`, the clamp being 1-Lipschitz: within `(5.001 +
-//!   9.51 + 1) u (1 + 10u) / D^2 <= 15.6 u / D^2` of the exact
+//! * `d2 = (d_x^2 + d_y^2) + d_z^2` within `5.001 u D^2`; its reciprocal
+//!   `v = 1 / d2` within `6.002 u / D^2`; `t = sqrt(v)` within `4.002 u /
+//!   D`; `r = v t` within `11.01 u / D^3` (one division and one square
+//!   root for each eight lights);
+//! * `w = max(h r, 0)`, the clamp being 1-Lipschitz: within `(5.001 +
+//!   11.01 + 1) u (1 + 12u) / D^2 <= 17.1 u / D^2` of the exact
 //!   `max(cos, 0) / D^2` (the height is at most `D`);
-//! * the term `I w` within `16.7 u I / D^2`;
+//! * the term `I w` within `18.2 u I / D^2`;
 //! * a lane's sum of its terms, then the lanes' sums (three pairwise
 //!   levels): at most `m + 2` roundings for `m` terms a lane, at most
 //!   [`COARSE_MAX`]` / 8 + 2 = 10`, each within `u` of the sum of the
-//!   terms' magnitudes (at most `1.00001 I / D^2` each).
+//!   terms' magnitudes (at most `1.00002 I / D^2` each).
 //!
-//! So the sum is within `26.8 u E` of the exact sum, per channel, with `E =
-//! sum I / D^2` over the lights. The same lanes sum `e = max_k I_k (1 /
-//! d2)` (each within `7.003 u` of `max_k I_k / D^2`, all positive, then
-//! at most ten roundings), so the computed `E'` is at least `E (1 - 17.01
-//! u)`, and `27 u E'` bounds the error; [`ERROR_UNITS`] `= 32` leaves a
-//! margin. `kd` multiplies sum and bound in `f64`.
+//! So the sum is within `28.3 u E` of the exact sum, per channel, with `E =
+//! sum I / D^2` over the lights. The same lanes sum `e = max_k I_k v`
+//! (each within `7.003 u` of `max_k I_k / D^2`, all positive, then at most
+//! ten roundings), so the computed `E'` is at least `E (1 - 17.01 u)`, and
+//! `28.4 u E'` bounds the error; [`ERROR_UNITS`] `= 32` leaves a margin.
+//! `kd` multiplies sum and bound in `f64`.
 //!
 //! Range: every lane must have `2^-60 <= d2 <= 2^60` and `max_k I_k <=
 //! 2^40`, or the sum returns `None` (the caller then sums in `f64`); then
 //! nothing overflows (a term is at most `2^100`, a sum of 64 at most
-//! `2^106`, `q` at most `2^90`). Underflow moves a product by at most
+//! `2^106`, `r` at most `2^90`). Underflow moves a product by at most
 //! `2^-150` (sums of subnormal values are exact): at most `2^-126 I` of
 //! `I w` against the `2^-80 I` the relative bound allows at the largest
 //! distance, except for the product `I w` itself and the envelope's `e`,
@@ -101,15 +103,15 @@ impl Frame {
         let n = self.normal;
         let h = (n.x * d.x + n.y * d.y) + n.z * d.z;
         let d2 = (d.x * d.x + d.y * d.y) + d.z * d.z;
-        let q = d2 * d2.sqrt();
-        let r = h / q;
-        let w = if r > 0.0 { r } else { 0.0 };
+        let v = 1.0 / d2;
+        let hr = h * (v * v.sqrt());
+        let w = if hr > 0.0 { hr } else { 0.0 };
         let i = light.intensity;
         let largest = max(max(i.x, i.y), i.z);
         for (sum, i) in sums.rgb.iter_mut().zip(i.to_array()) {
             sum[lane] += i * w;
         }
-        sums.envelope[lane] += largest * (1.0 / d2);
+        sums.envelope[lane] += largest * v;
         sums.in_range &= (D2_MIN..=D2_MAX).contains(&d2) && largest <= INTENSITY_MAX;
     }
 
@@ -204,76 +206,86 @@ pub(crate) fn sum_avx2(
     let (mut r, mut g, mut b, mut e) = (zero, zero, zero, zero);
     let all = _mm256_cmp_ps::<_CMP_LE_OQ>(zero, zero);
     let mut in_range = all;
-    // Eight lights' terms, added to the lanes that `mask` keeps.
-    let mut add = |chunk: &[PointLight], mask: __m256| {
-        // (x, y, z, red) of lights k and k + 4 in one vector's halves,
-        // transposed in each half to one vector per coordinate.
-        let row =
-            |l: &PointLight| _mm_set_ps(l.intensity.x, l.position.z, l.position.y, l.position.x);
-        let pair = |k: usize| _mm256_set_m128(row(&chunk[k + 4]), row(&chunk[k]));
-        let (a, b_, c, d) = (pair(0), pair(1), pair(2), pair(3));
-        let (t0, t1) = (_mm256_unpacklo_ps(a, b_), _mm256_unpackhi_ps(a, b_));
-        let (t2, t3) = (_mm256_unpacklo_ps(c, d), _mm256_unpackhi_ps(c, d));
-        let x = _mm256_shuffle_ps::<0x44>(t0, t2);
-        let y = _mm256_shuffle_ps::<0xEE>(t0, t2);
-        let z = _mm256_shuffle_ps::<0x44>(t1, t3);
-        let red = _mm256_shuffle_ps::<0xEE>(t1, t3);
-        // (green, blue) of lights k and k + 1, and k + 4 and k + 5.
-        let duo = |k: usize| -> __m128 {
-            let (l, m) = (&chunk[k], &chunk[k + 1]);
-            _mm_set_ps(m.intensity.z, m.intensity.y, l.intensity.z, l.intensity.y)
-        };
-        let gb01 = _mm256_set_m128(duo(4), duo(0));
-        let gb23 = _mm256_set_m128(duo(6), duo(2));
-        let green = _mm256_shuffle_ps::<0x88>(gb01, gb23);
-        let blue = _mm256_shuffle_ps::<0xDD>(gb01, gb23);
-        let (dx, dy, dz) = (
-            _mm256_sub_ps(x, px),
-            _mm256_sub_ps(y, py),
-            _mm256_sub_ps(z, pz),
-        );
-        let h = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
-            _mm256_mul_ps(nz, dz),
-        );
-        let d2 = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
-            _mm256_mul_ps(dz, dz),
-        );
-        let q = _mm256_mul_ps(d2, _mm256_sqrt_ps(d2));
-        let w = _mm256_max_ps(_mm256_div_ps(h, q), zero);
-        let largest = _mm256_max_ps(_mm256_max_ps(red, green), blue);
-        let kept = |v: __m256| _mm256_and_ps(v, mask);
-        r = _mm256_add_ps(r, kept(_mm256_mul_ps(red, w)));
-        g = _mm256_add_ps(g, kept(_mm256_mul_ps(green, w)));
-        b = _mm256_add_ps(b, kept(_mm256_mul_ps(blue, w)));
-        e = _mm256_add_ps(e, kept(_mm256_mul_ps(largest, _mm256_div_ps(one, d2))));
-        let ok = _mm256_and_ps(
-            _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GE_OQ>(d2, d2_min),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(d2, d2_max),
-            ),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(largest, intensity_max),
-        );
-        // Lanes left out count as in range.
-        in_range = _mm256_and_ps(in_range, _mm256_or_ps(ok, _mm256_andnot_ps(mask, all)));
-    };
+    // Up to eight lights' terms, added to the lanes that `mask` keeps; lane
+    // `k` reads light `min(k, len - 1)` where it lies (a padded copy of the
+    // last chunk would be stored and loaded back in pieces of different
+    // widths, which stalls the loads). A macro rather than a closure: a
+    // closure used twice is compiled out of line, a call per eight lights.
+    // One division and one square root per eight lights (module docs).
+    macro_rules! add {
+        ($chunk:expr, $mask:expr) => {{
+            let (chunk, mask): (&[PointLight], __m256) = ($chunk, $mask);
+            let last = chunk.len() - 1;
+            let at = |k: usize| &chunk[k.min(last)];
+            // (x, y, z, red) of lights k and k + 4 in one vector's halves,
+            // transposed in each half to one vector per coordinate.
+            let row = |l: &PointLight| {
+                _mm_set_ps(l.intensity.x, l.position.z, l.position.y, l.position.x)
+            };
+            let pair = |k: usize| _mm256_set_m128(row(at(k + 4)), row(at(k)));
+            let (a, b_, c, d) = (pair(0), pair(1), pair(2), pair(3));
+            let (t0, t1) = (_mm256_unpacklo_ps(a, b_), _mm256_unpackhi_ps(a, b_));
+            let (t2, t3) = (_mm256_unpacklo_ps(c, d), _mm256_unpackhi_ps(c, d));
+            let x = _mm256_shuffle_ps::<0x44>(t0, t2);
+            let y = _mm256_shuffle_ps::<0xEE>(t0, t2);
+            let z = _mm256_shuffle_ps::<0x44>(t1, t3);
+            let red = _mm256_shuffle_ps::<0xEE>(t1, t3);
+            // (green, blue) of lights k and k + 1, and k + 4 and k + 5.
+            let duo = |k: usize| -> __m128 {
+                let (l, m) = (at(k), at(k + 1));
+                _mm_set_ps(m.intensity.z, m.intensity.y, l.intensity.z, l.intensity.y)
+            };
+            let gb01 = _mm256_set_m128(duo(4), duo(0));
+            let gb23 = _mm256_set_m128(duo(6), duo(2));
+            let green = _mm256_shuffle_ps::<0x88>(gb01, gb23);
+            let blue = _mm256_shuffle_ps::<0xDD>(gb01, gb23);
+            let (dx, dy, dz) = (
+                _mm256_sub_ps(x, px),
+                _mm256_sub_ps(y, py),
+                _mm256_sub_ps(z, pz),
+            );
+            let h = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
+                _mm256_mul_ps(nz, dz),
+            );
+            let d2 = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                _mm256_mul_ps(dz, dz),
+            );
+            let v = _mm256_div_ps(one, d2);
+            let cube = _mm256_mul_ps(v, _mm256_sqrt_ps(v));
+            let w = _mm256_max_ps(_mm256_mul_ps(h, cube), zero);
+            let largest = _mm256_max_ps(_mm256_max_ps(red, green), blue);
+            let kept = |v: __m256| _mm256_and_ps(v, mask);
+            r = _mm256_add_ps(r, kept(_mm256_mul_ps(red, w)));
+            g = _mm256_add_ps(g, kept(_mm256_mul_ps(green, w)));
+            b = _mm256_add_ps(b, kept(_mm256_mul_ps(blue, w)));
+            e = _mm256_add_ps(e, kept(_mm256_mul_ps(largest, v)));
+            let ok = _mm256_and_ps(
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(d2, d2_min),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(d2, d2_max),
+                ),
+                _mm256_cmp_ps::<_CMP_LE_OQ>(largest, intensity_max),
+            );
+            // Lanes left out count as in range.
+            in_range = _mm256_and_ps(in_range, _mm256_or_ps(ok, _mm256_andnot_ps(mask, all)));
+        }};
+    }
     let chunks = lights.chunks_exact(LANES);
     let rest = chunks.remainder();
     for chunk in chunks {
-        add(chunk, all);
+        add!(chunk, all);
     }
-    if let Some(first) = rest.first() {
+    if !rest.is_empty() {
         // The last lights in lanes 0 onwards; the other lanes repeat the
-        // first of them and are left out (their terms cleared to +0, which
+        // last of them and are left out (their terms cleared to +0, which
         // adds nothing).
-        let mut padded = [*first; LANES];
-        padded[..rest.len()].copy_from_slice(rest);
         let mask = _mm256_cmp_ps::<_CMP_LT_OQ>(
             _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
             _mm256_set1_ps(rest.len() as f32),
         );
-        add(&padded, mask);
+        add!(rest, mask);
     }
     if _mm256_movemask_ps(in_range) != 0xff {
         return None;
