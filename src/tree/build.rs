@@ -294,10 +294,13 @@ impl TreeBuilder {
         // pass over a node's lights reads memory in sequence.
         let cheap = pool.cheap(n);
         let grid = morton::Grid::over(scene);
-        let codes = grid.codes_of(lights, cheap);
+        let unsorted = grid.codes_of(lights, cheap);
         // Median splits reorder lights within a run of equal codes only, so
         // the sorted codes stay valid for every run.
-        let codes = morton::sort_into(&codes, cheap, &mut tree.order);
+        let codes = morton::sort_into(&unsorted, cheap, &mut tree.order);
+        // Freed before the arrays that follow are taken, which can reuse
+        // its memory.
+        drop(unsorted);
         cheap.map_into(&tree.order, &mut tree.lights, |&k| lights[k as usize]);
 
         // Breadth-first: children of a node are appended together, so they
@@ -1106,11 +1109,24 @@ fn farthest_member(levels: &Levels<'_>, lights: &[PointLight], depth: usize, ind
     const MARGIN: f64 = 1.0 + 1.0 / 1_099_511_627_776.0; // 1 + 2^-40
     let node = levels.node(depth, index);
     let c = node.centroid.as_dvec3();
+    // The largest of 0 and the members' squared distances, four running
+    // maxima side by side (a maximum is exact, so in any order the same
+    // value; no distance is NaN or -0, so a comparison serves).
     let squared = |members: &[PointLight]| {
-        members
-            .iter()
-            .map(|l| (l.position.as_dvec3() - c).length_squared())
-            .fold(0.0f64, f64::max)
+        let distance = |l: &PointLight| (l.position.as_dvec3() - c).length_squared();
+        let larger = |a: f64, b: f64| if b > a { b } else { a };
+        let mut best = [0.0f64; 4];
+        let fours = members.chunks_exact(4);
+        let rest = fours.remainder();
+        for four in fours {
+            for (best, l) in best.iter_mut().zip(four) {
+                *best = larger(*best, distance(l));
+            }
+        }
+        for (best, l) in best.iter_mut().zip(rest) {
+            *best = larger(*best, distance(l));
+        }
+        larger(larger(best[0], best[1]), larger(best[2], best[3]))
     };
     if node.is_leaf() {
         return squared(&lights[node.lights()]);
