@@ -133,11 +133,12 @@ fn spanning_plane(tree: &LightTree, node: &Node) -> Option<[u32; 3]> {
     let first = range.start;
     let lights = &tree.lights[range];
     let n = lights.len();
-    // Four lights spread through the run, certainly off one plane: then no
-    // plane holds them all, whichever three the exact test would take.
+    // Four lights certainly off one plane: then no plane holds them all,
+    // whichever three the exact test would take. The first three and the
+    // last, in two or three cache lines (the exact test reads them too).
     if n >= 4 {
         let at = |k: usize| lights[k].position;
-        if certainly_not_coplanar(at(0), at(n / 3), at(2 * n / 3), at(n - 1)) {
+        if certainly_not_coplanar(at(0), at(1), at(2), at(n - 1)) {
             return None;
         }
     }
