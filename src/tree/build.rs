@@ -971,6 +971,10 @@ macro_rules! fill_node_body {
         let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
         let mut aabb = Aabb::EMPTY;
         let (kids, below) = if children.is_empty() {
+            // The lights of the leaves that follow, read next in this
+            // order, start loading while this one is summed.
+            let ahead = members.end..(members.end + LIGHTS_AHEAD).min($lights.len());
+            super::layout::prefetch(super::layout::as_bytes_range(&$lights[ahead]));
             for l in &$lights[members.clone()] {
                 let w = f64::from(l.weight());
                 let x = l.position.as_dvec3();
@@ -1042,6 +1046,10 @@ macro_rules! fill_node_body {
         (weight, weighted, plain)
     }};
 }
+
+/// Lights past a leaf's whose loading [`fill_node_body`] starts as it
+/// reaches the leaf (a leaf or two, in the build's default leaves).
+const LIGHTS_AHEAD: usize = 32;
 
 /// See [`fill_node_body`]: the baseline copy.
 fn fill_node_baseline(
