@@ -5,6 +5,7 @@ use core::ops::{Add, Mul, Sub};
 
 use glam::{DVec3, Vec3};
 
+use super::groups::{Ratios, leaf_ratios};
 use super::layout::{LightTree, MAX_CHILDREN, Node};
 use super::moments::{LeafScratch, Moments, Statistics};
 use super::morton;
@@ -350,9 +351,9 @@ impl TreeBuilder {
         drop(codes);
         cheap.map_into(&shapes, &mut tree.nodes, Shape::node);
         drop(shapes);
-        fill_statistics(tree, pool);
-        super::plane::record_planes(tree, cheap);
-        tree.fill_groups(pool);
+        let notes = fill_statistics(tree, pool);
+        super::plane::record_planes(tree, &notes, cheap);
+        tree.fill_groups_noted(&notes, pool);
         Ok(())
     }
 }
@@ -774,19 +775,24 @@ impl Shape {
 /// On a pool, disjoint subtrees are done side by side (each node by the
 /// same operations in the same order as on one thread), then the few nodes
 /// above them.
-pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
+///
+/// Returns every node's [`Notes`] for the planes and the blocks.
+pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) -> Vec<Notes> {
     let (lights, nodes) = (&tree.lights, &mut tree.nodes);
+    let mut notes = vec![Notes::NONE; nodes.len()];
     if nodes.is_empty() {
-        return;
+        return notes;
     }
     let mut scratch = StatisticsScratch::new();
     if !pool.parallel() {
-        let mut levels = Levels::split(nodes, &[0]).pop().expect("one subtree");
+        let mut levels = Levels::split(nodes, &mut notes, &[0])
+            .pop()
+            .expect("one subtree");
         fill_subtree(&mut levels, lights, &mut scratch);
-        return;
+        return notes;
     }
     let roots = subtrees(nodes, pool.parts());
-    let subtrees = Levels::split(nodes, &roots);
+    let subtrees = Levels::split(nodes, &mut notes, &roots);
     let done = pool.map_owned(subtrees, StatisticsScratch::new, |scratch, mut levels| {
         let (sums, moments) = fill_subtree(&mut levels, lights, scratch);
         Done {
@@ -797,9 +803,12 @@ pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
     });
     let mut done = done;
     done.sort_unstable_by_key(|d| d.root);
-    let mut levels = Levels::split(nodes, &[0]).pop().expect("one subtree");
+    let mut levels = Levels::split(nodes, &mut notes, &[0])
+        .pop()
+        .expect("one subtree");
     levels.done = &done;
     fill_subtree(&mut levels, lights, &mut scratch);
+    notes
 }
 
 /// A node's sums that its parent's are made of, in `f64`: its members'
@@ -814,13 +823,39 @@ struct Done {
     moments: Moments,
 }
 
+/// One level's run of a subtree's nodes: the index of its first node, the
+/// nodes and their notes.
+type Run<'a> = (usize, &'a mut [Node], &'a mut [Notes]);
+
+/// What the statistics pass notes of each node for the passes after it,
+/// from the lights it reads anyway (a leaf's while they are in the cache):
+/// the leaf's colour ratios (see [`leaf_ratios`]) and whether the node is
+/// known to hold four lights certainly off one plane (see
+/// [`certainly_not_coplanar`](super::plane::certainly_not_coplanar)): a
+/// leaf's first three and last, or any child's. Those passes would
+/// otherwise read every leaf's lights again, from memory.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Notes {
+    /// A leaf's [`leaf_ratios`]; unused for other nodes.
+    pub(super) ratios: Ratios,
+    /// Whether four of the node's lights lie certainly off one plane.
+    pub(super) off_plane: bool,
+}
+
+impl Notes {
+    const NONE: Self = Self {
+        ratios: [(f64::INFINITY, 0.0); 2],
+        off_plane: false,
+    };
+}
+
 /// Mutable access to one subtree's nodes, level by level. In breadth-first
 /// order a node's descendants at each depth are one contiguous run, so
 /// disjoint subtrees own disjoint runs.
 struct Levels<'a> {
     /// Per level below the subtree's root (the root's first): the index of
     /// the run's first node, and the run.
-    runs: Vec<(usize, &'a mut [Node])>,
+    runs: Vec<Run<'a>>,
     /// Subtrees below this one whose statistics are done, by root (the
     /// pass stops there); empty but for the nodes above a pool's subtrees.
     done: &'a [Done],
@@ -829,7 +864,7 @@ struct Levels<'a> {
 impl<'a> Levels<'a> {
     /// The subtrees of `roots` (disjoint: none holds another), each as its
     /// runs of `nodes`.
-    fn split(nodes: &'a mut [Node], roots: &[u32]) -> Vec<Self> {
+    fn split(nodes: &'a mut [Node], notes: &'a mut [Notes], roots: &[u32]) -> Vec<Self> {
         // Every subtree's runs, with the subtree they belong to: a run
         // below the last is from the first child of its first inner node
         // to the last child of its last.
@@ -856,12 +891,14 @@ impl<'a> Levels<'a> {
             .collect();
         // Runs in the order of the array: each subtree's come shallowest
         // first.
-        let (mut rest, mut offset) = (nodes, 0);
+        let (mut rest, mut rest_notes, mut offset) = (nodes, notes, 0);
         for (start, end, k) in runs {
             let (_, tail) = rest.split_at_mut(start - offset);
             let (run, tail) = tail.split_at_mut(end - start);
-            out[k].runs.push((start, run));
-            (rest, offset) = (tail, end);
+            let (_, tail_notes) = rest_notes.split_at_mut(start - offset);
+            let (run_notes, tail_notes) = tail_notes.split_at_mut(end - start);
+            out[k].runs.push((start, run, run_notes));
+            (rest, rest_notes, offset) = (tail, tail_notes, end);
         }
         out
     }
@@ -874,15 +911,29 @@ impl<'a> Levels<'a> {
     /// Node `index`, at `depth` levels below the subtree's root.
     #[inline(always)]
     fn node(&self, depth: usize, index: usize) -> &Node {
-        let (start, run) = &self.runs[depth];
+        let (start, run, _) = &self.runs[depth];
         &run[index - start]
     }
 
     /// See [`node`](Self::node).
     #[inline(always)]
     fn node_mut(&mut self, depth: usize, index: usize) -> &mut Node {
-        let (start, run) = &mut self.runs[depth];
+        let (start, run, _) = &mut self.runs[depth];
         &mut run[index - *start]
+    }
+
+    /// The notes of node `index` (see [`node`](Self::node)).
+    #[inline(always)]
+    fn notes(&self, depth: usize, index: usize) -> &Notes {
+        let (start, _, notes) = &self.runs[depth];
+        &notes[index - start]
+    }
+
+    /// See [`notes`](Self::notes).
+    #[inline(always)]
+    fn notes_mut(&mut self, depth: usize, index: usize) -> &mut Notes {
+        let (start, _, notes) = &mut self.runs[depth];
+        &mut notes[index - *start]
     }
 
     /// The statistics of the subtree of `index` if they are done.
@@ -975,7 +1026,18 @@ macro_rules! fill_node_body {
             // order, start loading while this one is summed.
             let ahead = members.end..(members.end + LIGHTS_AHEAD).min($lights.len());
             super::layout::prefetch(super::layout::as_bytes_range(&$lights[ahead]));
-            for l in &$lights[members.clone()] {
+            let leaf = &$lights[members.clone()];
+            *$levels.notes_mut($depth, $index) = Notes {
+                ratios: leaf_ratios(leaf),
+                off_plane: leaf.len() >= 4
+                    && super::plane::certainly_not_coplanar(
+                        leaf[0].position,
+                        leaf[1].position,
+                        leaf[2].position,
+                        leaf[leaf.len() - 1].position,
+                    ),
+            };
+            for l in leaf {
                 let w = f64::from(l.weight());
                 let x = l.position.as_dvec3();
                 intensity += l.intensity.as_dvec3();
@@ -993,6 +1055,10 @@ macro_rules! fill_node_body {
             for ((k, kid), sum) in children.clone().zip(kids.iter_mut()).zip(&mut sums) {
                 *sum = $recurse($levels, $lights, $depth + 1, k, kid, below, $scratch);
             }
+            let off_plane = children
+                .clone()
+                .any(|k| $levels.notes($depth + 1, k).off_plane);
+            $levels.notes_mut($depth, $index).off_plane = off_plane;
             for (k, (w, wx, x)) in children.clone().zip(sums) {
                 let child = $levels.node($depth + 1, k);
                 intensity += child.intensity;

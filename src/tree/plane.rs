@@ -14,6 +14,7 @@
 
 use glam::{DVec3, Vec3};
 
+use super::build::Notes;
 use super::layout::{LightTree, NO_PLANE, Node};
 use super::pool::Pool;
 use crate::numeric::dot_of_difference;
@@ -176,7 +177,7 @@ fn spanning_plane(tree: &LightTree, node: &Node) -> Option<[u32; 3]> {
 /// 2^-53`. The `f32` coordinates' differences and their products neither
 /// overflow nor underflow in `f64` (their magnitudes lie between `2^-447`
 /// and `2^183`, or are 0). False says nothing: the exact test decides.
-fn certainly_not_coplanar(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> bool {
+pub(super) fn certainly_not_coplanar(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> bool {
     /// Shewchuk's `o3derrboundA`, with his `epsilon` (half an ulp of 1).
     const BOUND: f64 = (7.0 + 56.0 * HALF_ULP) * HALF_ULP;
     const HALF_ULP: f64 = f64::EPSILON / 2.0;
@@ -218,28 +219,35 @@ const SOLID: f64 = 1e-3;
 /// at the first coplanar node of each path: `O(n depth)` in the
 /// worst case, far less where lights leave the plane early (a check fails
 /// at the first light off it).
-pub(super) fn record_planes(tree: &mut LightTree, pool: Pool) {
+///
+/// Nodes that the statistics pass `notes` knew to hold four lights off one
+/// plane are not examined: no plane holds all their lights.
+pub(super) fn record_planes(tree: &mut LightTree, notes: &[Notes], pool: Pool) {
     tree.planes.clear();
     tree.node_planes.clear();
     if tree.nodes.is_empty() {
         return;
     }
-    let examined = |node: &Node| {
+    let examined = |i: usize, node: &Node| {
         node.light_count >= MIN_LIGHTS
             && (node.aabb.max - node.aabb.min).min_element() > 0.0
+            && !notes.get(i).is_some_and(|n| n.off_plane)
             && !clearly_solid(node)
     };
     // On a pool, every node's own plane is looked for first, side by side;
     // the pass below then takes those it would have looked for.
     let spanned = if pool.parallel() {
         let tree = &*tree;
-        pool.map(&tree.nodes, |node| {
-            if examined(node) {
+        let mut spanned = vec![None; tree.nodes.len()];
+        pool.fill(&mut spanned, |i| {
+            let node = &tree.nodes[i];
+            if examined(i, node) {
                 spanning_plane(tree, node)
             } else {
                 None
             }
-        })
+        });
+        spanned
     } else {
         Vec::new()
     };
@@ -253,7 +261,7 @@ pub(super) fn record_planes(tree: &mut LightTree, pool: Pool) {
         if plane == NO_PLANE
             && let Some(triple) = match spanned.get(i) {
                 Some(triple) => *triple,
-                None if examined(node) => spanning_plane(tree, node),
+                None if examined(i, node) => spanning_plane(tree, node),
                 None => None,
             }
         {
