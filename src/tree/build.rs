@@ -351,9 +351,9 @@ impl TreeBuilder {
         drop(codes);
         cheap.map_into(&shapes, &mut tree.nodes, Shape::node);
         drop(shapes);
-        let notes = fill_statistics(tree, pool);
+        let mut notes = fill_statistics(tree, pool);
         super::plane::record_planes(tree, &notes, cheap);
-        tree.fill_groups_noted(&notes, pool);
+        tree.fill_groups_noted(&mut notes, pool);
         Ok(())
     }
 }
@@ -836,14 +836,15 @@ type Run<'a> = (usize, &'a mut [Node], &'a mut [Notes]);
 /// otherwise read every leaf's lights again, from memory.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Notes {
-    /// A leaf's [`leaf_ratios`]; unused for other nodes.
+    /// A leaf's [`leaf_ratios`]; for other nodes, set from their
+    /// children's when the blocks are made.
     pub(super) ratios: Ratios,
     /// Whether four of the node's lights lie certainly off one plane.
     pub(super) off_plane: bool,
 }
 
 impl Notes {
-    const NONE: Self = Self {
+    pub(super) const NONE: Self = Self {
         ratios: [(f64::INFINITY, 0.0); 2],
         off_plane: false,
     };

@@ -29,6 +29,7 @@
 //! numbers rounded upward (see [`half_up`]), so that they still bound the
 //! node's multipoles.
 
+use super::build::Notes;
 use super::layout::{LightTree, Node};
 use super::pool::Pool;
 use crate::PointLight;
@@ -223,19 +224,19 @@ impl<const N: usize, const R: usize, const M: usize> Block<N, R, M> {
 /// and `I_k = sum r_i I_0,i` in `[r_min I_0, r_max I_0]`, whence `S_k / I_k`
 /// lies within `[S_0 / I_0 / s, s S_0 / I_0]`.
 pub(crate) fn colour_spreads(nodes: &[Node], lights: &[PointLight]) -> Vec<[f32; 2]> {
-    let mut ranges = vec![[(f64::INFINITY, 0.0f64); 2]; nodes.len()];
-    for (node, ranges) in nodes.iter().zip(&mut ranges) {
+    let mut notes = vec![Notes::NONE; nodes.len()];
+    for (node, notes) in nodes.iter().zip(&mut notes) {
         if node.is_leaf() {
-            *ranges = leaf_ratios(lights.get(node.lights()).unwrap_or(&[]));
+            notes.ratios = leaf_ratios(lights.get(node.lights()).unwrap_or(&[]));
         }
     }
-    spreads_from_leaves(nodes, ranges)
+    spreads_from_leaves(nodes, &mut notes)
 }
 
 /// Per channel 1 and 2, the smallest and largest ratio to channel 0 of a
 /// node's lights, each computed within one rounding (2^-53 relative) of
 /// its value (see [`colour_spreads`]).
-pub(crate) type Ratios = [(f64, f64); 2];
+pub(super) type Ratios = [(f64, f64); 2];
 
 /// Widens `range` to hold `[low, high]`: one minimum and one maximum
 /// instruction, a NaN end failing its comparison and passed over.
@@ -249,7 +250,7 @@ fn widen(range: &mut (f64, f64), (low, high): (f64, f64)) {
 /// The [`Ratios`] of a leaf's `lights`, read only until its spread passes
 /// [`MONO_SPREAD_MAX`].
 #[inline(always)]
-pub(crate) fn leaf_ratios(lights: &[PointLight]) -> Ratios {
+pub(super) fn leaf_ratios(lights: &[PointLight]) -> Ratios {
     let mut range = [(f64::INFINITY, 0.0f64); 2];
     // Without branches: a member with nothing in channel 0 has a ratio of
     // infinity where it has something in channel k, and NaN (0 / 0) where
@@ -272,10 +273,10 @@ pub(crate) fn leaf_ratios(lights: &[PointLight]) -> Ratios {
     range
 }
 
-/// [`colour_spreads`] from `ranges`, which hold every leaf's
-/// [`leaf_ratios`]: every other node's from its children's (which follow
-/// it), from the last node up.
-pub(crate) fn spreads_from_leaves(nodes: &[Node], mut ranges: Vec<Ratios>) -> Vec<[f32; 2]> {
+/// [`colour_spreads`] from `notes` (one per node), which hold every
+/// leaf's [`leaf_ratios`]: every other node's ratios from its children's
+/// (which follow it), from the last node up, written into its notes.
+fn spreads_from_leaves(nodes: &[Node], notes: &mut [Notes]) -> Vec<[f32; 2]> {
     for index in (0..nodes.len()).rev() {
         let node = &nodes[index];
         if node.is_leaf() {
@@ -283,16 +284,16 @@ pub(crate) fn spreads_from_leaves(nodes: &[Node], mut ranges: Vec<Ratios>) -> Ve
         }
         let mut range = [(f64::INFINITY, 0.0f64); 2];
         for child in node.children() {
-            for (range, &child_range) in range.iter_mut().zip(&ranges[child]) {
+            for (range, &child_range) in range.iter_mut().zip(&notes[child].ratios) {
                 widen(range, child_range);
             }
         }
-        ranges[index] = range;
+        notes[index].ratios = range;
     }
-    ranges
+    notes
         .iter()
-        .map(|range| {
-            range.map(|(low, high)| {
+        .map(|notes| {
+            notes.ratios.map(|(low, high)| {
                 if high == 0.0 || (low == 1.0 && high == 1.0) {
                     1.0
                 } else if low > 0.0 && high < f64::INFINITY {
@@ -542,9 +543,8 @@ impl LightTree {
     /// [`fill_groups`](Self::fill_groups) with the leaves' colour ratios
     /// taken from the statistics pass's `notes` (one per node) rather
     /// than read again from the lights: the same blocks.
-    pub(super) fn fill_groups_noted(&mut self, notes: &[super::build::Notes], pool: Pool) {
-        let ranges = notes.iter().map(|n| n.ratios).collect();
-        let spreads = spreads_from_leaves(&self.nodes, ranges);
+    pub(super) fn fill_groups_noted(&mut self, notes: &mut [Notes], pool: Pool) {
+        let spreads = spreads_from_leaves(&self.nodes, notes);
         self.groups.refill_spread(&self.nodes, &spreads, pool);
     }
 }
