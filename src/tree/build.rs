@@ -5,6 +5,7 @@ use core::ops::{Add, Mul, Sub};
 
 use glam::{DVec3, Vec3};
 
+use super::groups::{Ratios, leaf_ratios};
 use super::layout::{LightTree, MAX_CHILDREN, Node};
 use super::moments::{LeafScratch, Moments, Statistics};
 use super::morton;
@@ -294,10 +295,13 @@ impl TreeBuilder {
         // pass over a node's lights reads memory in sequence.
         let cheap = pool.cheap(n);
         let grid = morton::Grid::over(scene);
-        let codes = grid.codes_of(lights, cheap);
+        let unsorted = grid.codes_of(lights, cheap);
         // Median splits reorder lights within a run of equal codes only, so
         // the sorted codes stay valid for every run.
-        let codes = morton::sort_into(&codes, cheap, &mut tree.order);
+        let codes = morton::sort_into(&unsorted, cheap, &mut tree.order);
+        // Freed before the arrays that follow are taken, which can reuse
+        // its memory.
+        drop(unsorted);
         cheap.map_into(&tree.order, &mut tree.lights, |&k| lights[k as usize]);
 
         // Breadth-first: children of a node are appended together, so they
@@ -347,9 +351,9 @@ impl TreeBuilder {
         drop(codes);
         cheap.map_into(&shapes, &mut tree.nodes, Shape::node);
         drop(shapes);
-        fill_statistics(tree, pool);
-        super::plane::record_planes(tree, cheap);
-        tree.fill_groups(pool);
+        let mut notes = fill_statistics(tree, pool);
+        super::plane::record_planes(tree, &notes, cheap);
+        tree.fill_groups_noted(&mut notes, pool);
         Ok(())
     }
 }
@@ -771,19 +775,24 @@ impl Shape {
 /// On a pool, disjoint subtrees are done side by side (each node by the
 /// same operations in the same order as on one thread), then the few nodes
 /// above them.
-pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
+///
+/// Returns every node's [`Notes`] for the planes and the blocks.
+pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) -> Vec<Notes> {
     let (lights, nodes) = (&tree.lights, &mut tree.nodes);
+    let mut notes = vec![Notes::NONE; nodes.len()];
     if nodes.is_empty() {
-        return;
+        return notes;
     }
     let mut scratch = StatisticsScratch::new();
     if !pool.parallel() {
-        let mut levels = Levels::split(nodes, &[0]).pop().expect("one subtree");
+        let mut levels = Levels::split(nodes, &mut notes, &[0])
+            .pop()
+            .expect("one subtree");
         fill_subtree(&mut levels, lights, &mut scratch);
-        return;
+        return notes;
     }
     let roots = subtrees(nodes, pool.parts());
-    let subtrees = Levels::split(nodes, &roots);
+    let subtrees = Levels::split(nodes, &mut notes, &roots);
     let done = pool.map_owned(subtrees, StatisticsScratch::new, |scratch, mut levels| {
         let (sums, moments) = fill_subtree(&mut levels, lights, scratch);
         Done {
@@ -794,9 +803,12 @@ pub(super) fn fill_statistics(tree: &mut LightTree, pool: Pool) {
     });
     let mut done = done;
     done.sort_unstable_by_key(|d| d.root);
-    let mut levels = Levels::split(nodes, &[0]).pop().expect("one subtree");
+    let mut levels = Levels::split(nodes, &mut notes, &[0])
+        .pop()
+        .expect("one subtree");
     levels.done = &done;
     fill_subtree(&mut levels, lights, &mut scratch);
+    notes
 }
 
 /// A node's sums that its parent's are made of, in `f64`: its members'
@@ -811,13 +823,40 @@ struct Done {
     moments: Moments,
 }
 
+/// One level's run of a subtree's nodes: the index of its first node, the
+/// nodes and their notes.
+type Run<'a> = (usize, &'a mut [Node], &'a mut [Notes]);
+
+/// What the statistics pass notes of each node for the passes after it,
+/// from the lights it reads anyway (a leaf's while they are in the cache):
+/// the leaf's colour ratios (see [`leaf_ratios`]) and whether the node is
+/// known to hold four lights certainly off one plane (see
+/// [`certainly_not_coplanar`](super::plane::certainly_not_coplanar)): a
+/// leaf's first three and last, or any child's. Those passes would
+/// otherwise read every leaf's lights again, from memory.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Notes {
+    /// A leaf's [`leaf_ratios`]; for other nodes, set from their
+    /// children's when the blocks are made.
+    pub(super) ratios: Ratios,
+    /// Whether four of the node's lights lie certainly off one plane.
+    pub(super) off_plane: bool,
+}
+
+impl Notes {
+    pub(super) const NONE: Self = Self {
+        ratios: [(f64::INFINITY, 0.0); 2],
+        off_plane: false,
+    };
+}
+
 /// Mutable access to one subtree's nodes, level by level. In breadth-first
 /// order a node's descendants at each depth are one contiguous run, so
 /// disjoint subtrees own disjoint runs.
 struct Levels<'a> {
     /// Per level below the subtree's root (the root's first): the index of
     /// the run's first node, and the run.
-    runs: Vec<(usize, &'a mut [Node])>,
+    runs: Vec<Run<'a>>,
     /// Subtrees below this one whose statistics are done, by root (the
     /// pass stops there); empty but for the nodes above a pool's subtrees.
     done: &'a [Done],
@@ -826,7 +865,7 @@ struct Levels<'a> {
 impl<'a> Levels<'a> {
     /// The subtrees of `roots` (disjoint: none holds another), each as its
     /// runs of `nodes`.
-    fn split(nodes: &'a mut [Node], roots: &[u32]) -> Vec<Self> {
+    fn split(nodes: &'a mut [Node], notes: &'a mut [Notes], roots: &[u32]) -> Vec<Self> {
         // Every subtree's runs, with the subtree they belong to: a run
         // below the last is from the first child of its first inner node
         // to the last child of its last.
@@ -853,12 +892,14 @@ impl<'a> Levels<'a> {
             .collect();
         // Runs in the order of the array: each subtree's come shallowest
         // first.
-        let (mut rest, mut offset) = (nodes, 0);
+        let (mut rest, mut rest_notes, mut offset) = (nodes, notes, 0);
         for (start, end, k) in runs {
             let (_, tail) = rest.split_at_mut(start - offset);
             let (run, tail) = tail.split_at_mut(end - start);
-            out[k].runs.push((start, run));
-            (rest, offset) = (tail, end);
+            let (_, tail_notes) = rest_notes.split_at_mut(start - offset);
+            let (run_notes, tail_notes) = tail_notes.split_at_mut(end - start);
+            out[k].runs.push((start, run, run_notes));
+            (rest, rest_notes, offset) = (tail, tail_notes, end);
         }
         out
     }
@@ -871,15 +912,29 @@ impl<'a> Levels<'a> {
     /// Node `index`, at `depth` levels below the subtree's root.
     #[inline(always)]
     fn node(&self, depth: usize, index: usize) -> &Node {
-        let (start, run) = &self.runs[depth];
+        let (start, run, _) = &self.runs[depth];
         &run[index - start]
     }
 
     /// See [`node`](Self::node).
     #[inline(always)]
     fn node_mut(&mut self, depth: usize, index: usize) -> &mut Node {
-        let (start, run) = &mut self.runs[depth];
+        let (start, run, _) = &mut self.runs[depth];
         &mut run[index - *start]
+    }
+
+    /// The notes of node `index` (see [`node`](Self::node)).
+    #[inline(always)]
+    fn notes(&self, depth: usize, index: usize) -> &Notes {
+        let (start, _, notes) = &self.runs[depth];
+        &notes[index - start]
+    }
+
+    /// See [`notes`](Self::notes).
+    #[inline(always)]
+    fn notes_mut(&mut self, depth: usize, index: usize) -> &mut Notes {
+        let (start, _, notes) = &mut self.runs[depth];
+        &mut notes[index - *start]
     }
 
     /// The statistics of the subtree of `index` if they are done.
@@ -968,7 +1023,22 @@ macro_rules! fill_node_body {
         let (mut weight, mut weighted, mut plain) = (0.0f64, DVec3::ZERO, DVec3::ZERO);
         let mut aabb = Aabb::EMPTY;
         let (kids, below) = if children.is_empty() {
-            for l in &$lights[members.clone()] {
+            // The lights of the leaves that follow, read next in this
+            // order, start loading while this one is summed.
+            let ahead = members.end..(members.end + LIGHTS_AHEAD).min($lights.len());
+            super::layout::prefetch(super::layout::as_bytes_range(&$lights[ahead]));
+            let leaf = &$lights[members.clone()];
+            *$levels.notes_mut($depth, $index) = Notes {
+                ratios: leaf_ratios(leaf),
+                off_plane: leaf.len() >= 4
+                    && super::plane::certainly_not_coplanar(
+                        leaf[0].position,
+                        leaf[1].position,
+                        leaf[2].position,
+                        leaf[leaf.len() - 1].position,
+                    ),
+            };
+            for l in leaf {
                 let w = f64::from(l.weight());
                 let x = l.position.as_dvec3();
                 intensity += l.intensity.as_dvec3();
@@ -986,6 +1056,10 @@ macro_rules! fill_node_body {
             for ((k, kid), sum) in children.clone().zip(kids.iter_mut()).zip(&mut sums) {
                 *sum = $recurse($levels, $lights, $depth + 1, k, kid, below, $scratch);
             }
+            let off_plane = children
+                .clone()
+                .any(|k| $levels.notes($depth + 1, k).off_plane);
+            $levels.notes_mut($depth, $index).off_plane = off_plane;
             for (k, (w, wx, x)) in children.clone().zip(sums) {
                 let child = $levels.node($depth + 1, k);
                 intensity += child.intensity;
@@ -1039,6 +1113,10 @@ macro_rules! fill_node_body {
         (weight, weighted, plain)
     }};
 }
+
+/// Lights past a leaf's whose loading [`fill_node_body`] starts as it
+/// reaches the leaf (a leaf or two, in the build's default leaves).
+const LIGHTS_AHEAD: usize = 32;
 
 /// See [`fill_node_body`]: the baseline copy.
 fn fill_node_baseline(
@@ -1106,11 +1184,24 @@ fn farthest_member(levels: &Levels<'_>, lights: &[PointLight], depth: usize, ind
     const MARGIN: f64 = 1.0 + 1.0 / 1_099_511_627_776.0; // 1 + 2^-40
     let node = levels.node(depth, index);
     let c = node.centroid.as_dvec3();
+    // The largest of 0 and the members' squared distances, four running
+    // maxima side by side (a maximum is exact, so in any order the same
+    // value; no distance is NaN or -0, so a comparison serves).
     let squared = |members: &[PointLight]| {
-        members
-            .iter()
-            .map(|l| (l.position.as_dvec3() - c).length_squared())
-            .fold(0.0f64, f64::max)
+        let distance = |l: &PointLight| (l.position.as_dvec3() - c).length_squared();
+        let larger = |a: f64, b: f64| if b > a { b } else { a };
+        let mut best = [0.0f64; 4];
+        let fours = members.chunks_exact(4);
+        let rest = fours.remainder();
+        for four in fours {
+            for (best, l) in best.iter_mut().zip(four) {
+                *best = larger(*best, distance(l));
+            }
+        }
+        for (best, l) in best.iter_mut().zip(rest) {
+            *best = larger(*best, distance(l));
+        }
+        larger(larger(best[0], best[1]), larger(best[2], best[3]))
     };
     if node.is_leaf() {
         return squared(&lights[node.lights()]);

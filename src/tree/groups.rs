@@ -29,6 +29,7 @@
 //! numbers rounded upward (see [`half_up`]), so that they still bound the
 //! node's multipoles.
 
+use super::build::Notes;
 use super::layout::{LightTree, Node};
 use super::pool::Pool;
 use crate::PointLight;
@@ -223,52 +224,76 @@ impl<const N: usize, const R: usize, const M: usize> Block<N, R, M> {
 /// and `I_k = sum r_i I_0,i` in `[r_min I_0, r_max I_0]`, whence `S_k / I_k`
 /// lies within `[S_0 / I_0 / s, s S_0 / I_0]`.
 pub(crate) fn colour_spreads(nodes: &[Node], lights: &[PointLight]) -> Vec<[f32; 2]> {
-    // Per node and channel 1, 2: the smallest and largest ratio, each
-    // computed within one rounding (2^-53 relative) of its value.
-    let mut ranges = vec![[(f64::INFINITY, 0.0f64); 2]; nodes.len()];
+    let mut notes = vec![Notes::NONE; nodes.len()];
+    for (node, notes) in nodes.iter().zip(&mut notes) {
+        if node.is_leaf() {
+            notes.ratios = leaf_ratios(lights.get(node.lights()).unwrap_or(&[]));
+        }
+    }
+    spreads_from_leaves(nodes, &mut notes)
+}
+
+/// Per channel 1 and 2, the smallest and largest ratio to channel 0 of a
+/// node's lights, each computed within one rounding (2^-53 relative) of
+/// its value (see [`colour_spreads`]).
+pub(super) type Ratios = [(f64, f64); 2];
+
+/// Widens `range` to hold `[low, high]`: one minimum and one maximum
+/// instruction, a NaN end failing its comparison and passed over.
+#[allow(clippy::manual_clamp)]
+#[inline(always)]
+fn widen(range: &mut (f64, f64), (low, high): (f64, f64)) {
+    range.0 = if low < range.0 { low } else { range.0 };
+    range.1 = if high > range.1 { high } else { range.1 };
+}
+
+/// The [`Ratios`] of a leaf's `lights`, read only until its spread passes
+/// [`MONO_SPREAD_MAX`].
+#[inline(always)]
+pub(super) fn leaf_ratios(lights: &[PointLight]) -> Ratios {
+    let mut range = [(f64::INFINITY, 0.0f64); 2];
+    // Without branches: a member with nothing in channel 0 has a ratio of
+    // infinity where it has something in channel k, and NaN (0 / 0) where
+    // it has nothing there either, adding 0 to both channels' sums.
+    for light in lights {
+        let i = light.intensity.as_dvec3();
+        for (k, range) in range.iter_mut().enumerate() {
+            let r = i[k + 1] / i.x;
+            widen(range, (r, r));
+        }
+        // A leaf of many colours is settled (and so are its ancestors):
+        // the rest of its lights are not read.
+        if range
+            .iter()
+            .any(|&(low, high)| high > low * MONO_SPREAD_MAX)
+        {
+            break;
+        }
+    }
+    range
+}
+
+/// [`colour_spreads`] from `notes` (one per node), which hold every
+/// leaf's [`leaf_ratios`]: every other node's ratios from its children's
+/// (which follow it), from the last node up, written into its notes.
+fn spreads_from_leaves(nodes: &[Node], notes: &mut [Notes]) -> Vec<[f32; 2]> {
     for index in (0..nodes.len()).rev() {
         let node = &nodes[index];
-        let mut range = [(f64::INFINITY, 0.0f64); 2];
-        // Widens `range` to hold `[low, high]`: one minimum and one maximum
-        // instruction, a NaN end failing its comparison and passed over.
-        #[allow(clippy::manual_clamp)]
-        fn widen(range: &mut (f64, f64), (low, high): (f64, f64)) {
-            range.0 = if low < range.0 { low } else { range.0 };
-            range.1 = if high > range.1 { high } else { range.1 };
-        }
         if node.is_leaf() {
-            // Without branches: a member with nothing in channel 0 has a
-            // ratio of infinity where it has something in channel k, and
-            // NaN (0 / 0) where it has nothing there either, adding 0 to
-            // both channels' sums.
-            for light in lights.get(node.lights()).unwrap_or(&[]) {
-                let i = light.intensity.as_dvec3();
-                for (k, range) in range.iter_mut().enumerate() {
-                    let r = i[k + 1] / i.x;
-                    widen(range, (r, r));
-                }
-                // A leaf of many colours is settled (and so are its
-                // ancestors): the rest of its lights are not read.
-                if range
-                    .iter()
-                    .any(|&(low, high)| high > low * MONO_SPREAD_MAX)
-                {
-                    break;
-                }
-            }
-        } else {
-            for child in node.children() {
-                for (range, &child_range) in range.iter_mut().zip(&ranges[child]) {
-                    widen(range, child_range);
-                }
+            continue;
+        }
+        let mut range = [(f64::INFINITY, 0.0f64); 2];
+        for child in node.children() {
+            for (range, &child_range) in range.iter_mut().zip(&notes[child].ratios) {
+                widen(range, child_range);
             }
         }
-        ranges[index] = range;
+        notes[index].ratios = range;
     }
-    ranges
+    notes
         .iter()
-        .map(|range| {
-            range.map(|(low, high)| {
+        .map(|notes| {
+            notes.ratios.map(|(low, high)| {
                 if high == 0.0 || (low == 1.0 && high == 1.0) {
                     1.0
                 } else if low > 0.0 && high < f64::INFINITY {
@@ -301,7 +326,11 @@ impl NodeGroups {
     /// `lights`), filled on `pool`, in the memory they hold (the same
     /// blocks as [`NodeGroups::new_on`]).
     pub(crate) fn refill(&mut self, nodes: &[Node], lights: &[PointLight], pool: Pool) {
-        let spreads = colour_spreads(nodes, lights);
+        self.refill_spread(nodes, &colour_spreads(nodes, lights), pool);
+    }
+
+    /// [`refill`](Self::refill) with the nodes' [`colour_spreads`] given.
+    pub(crate) fn refill_spread(&mut self, nodes: &[Node], spreads: &[[f32; 2]], pool: Pool) {
         let at = &mut self.at;
         at.clear();
         at.resize(nodes.len(), NO_BLOCK);
@@ -346,13 +375,13 @@ impl NodeGroups {
                 Pool::ONE
             }
         };
-        on(fours.len()).map_into(&fours, &mut self.fours, |&i| block(nodes, &spreads, i));
-        on(eights.len()).map_into(&eights, &mut self.eights, |&i| block(nodes, &spreads, i));
+        on(fours.len()).map_into(&fours, &mut self.fours, |&i| block(nodes, spreads, i));
+        on(eights.len()).map_into(&eights, &mut self.eights, |&i| block(nodes, spreads, i));
         on(mono_fours.len()).map_into(&mono_fours, &mut self.mono_fours, |&i| {
-            block(nodes, &spreads, i)
+            block(nodes, spreads, i)
         });
         on(mono_eights.len()).map_into(&mono_eights, &mut self.mono_eights, |&i| {
-            block(nodes, &spreads, i)
+            block(nodes, spreads, i)
         });
     }
 
@@ -509,6 +538,14 @@ impl LightTree {
     /// on `pool`.
     pub(crate) fn fill_groups(&mut self, pool: Pool) {
         self.groups.refill(&self.nodes, &self.lights, pool);
+    }
+
+    /// [`fill_groups`](Self::fill_groups) with the leaves' colour ratios
+    /// taken from the statistics pass's `notes` (one per node) rather
+    /// than read again from the lights: the same blocks.
+    pub(super) fn fill_groups_noted(&mut self, notes: &mut [Notes], pool: Pool) {
+        let spreads = spreads_from_leaves(&self.nodes, notes);
+        self.groups.refill_spread(&self.nodes, &spreads, pool);
     }
 }
 

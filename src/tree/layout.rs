@@ -358,7 +358,7 @@ impl LightTree {
 
 /// The address range of a slice.
 #[inline]
-fn as_bytes_range<T>(items: &[T]) -> core::ops::Range<usize> {
+pub(super) fn as_bytes_range<T>(items: &[T]) -> core::ops::Range<usize> {
     let start = items.as_ptr() as usize;
     start..start + core::mem::size_of_val(items)
 }
@@ -383,7 +383,7 @@ const PREFETCH_LINES: usize = 16;
 /// [`PREFETCH_LINES`] of them) into every cache level. A hint only: it
 /// reads no memory the program can observe and never faults.
 #[inline]
-fn prefetch(range: core::ops::Range<usize>) {
+pub(super) fn prefetch(range: core::ops::Range<usize>) {
     #[cfg(target_arch = "x86_64")]
     {
         use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};

@@ -321,11 +321,13 @@ fn radix_passes(keys: &mut [u64], order: &mut [u32], scratch: &mut Scratch, digi
     }
 }
 
-/// A field of key bits: `width` bits from bit `shift` up.
+/// A field of key bits: `width` bits from bit `shift` up (`mask`, the
+/// field's `width` low bits set, kept for [`of`](Self::of)).
 #[derive(Clone, Copy, Default)]
 struct Digit {
     shift: u32,
     width: u32,
+    mask: u64,
 }
 
 impl Digit {
@@ -337,11 +339,13 @@ impl Digit {
         Self {
             shift: top - width,
             width,
+            mask: (1 << width) - 1,
         }
     }
 
+    #[inline(always)]
     fn of(self, key: u64) -> usize {
-        ((key >> self.shift) & ((1 << self.width) - 1)) as usize
+        ((key >> self.shift) & self.mask) as usize
     }
 
     fn buckets(self) -> usize {

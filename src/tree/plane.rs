@@ -14,6 +14,7 @@
 
 use glam::{DVec3, Vec3};
 
+use super::build::Notes;
 use super::layout::{LightTree, NO_PLANE, Node};
 use super::pool::Pool;
 use crate::numeric::dot_of_difference;
@@ -132,6 +133,16 @@ fn spanning_plane(tree: &LightTree, node: &Node) -> Option<[u32; 3]> {
     let range = node.lights();
     let first = range.start;
     let lights = &tree.lights[range];
+    let n = lights.len();
+    // Four lights certainly off one plane: then no plane holds them all,
+    // whichever three the exact test would take. The first three and the
+    // last, in two or three cache lines (the exact test reads them too).
+    if n >= 4 {
+        let at = |k: usize| lights[k].position;
+        if certainly_not_coplanar(at(0), at(1), at(2), at(n - 1)) {
+            return None;
+        }
+    }
     let grid = Grid::for_largest(f64::from(
         node.aabb.min.abs().max(node.aabb.max.abs()).max_element(),
     ))?;
@@ -148,13 +159,38 @@ fn spanning_plane(tree: &LightTree, node: &Node) -> Option<[u32; 3]> {
     // |normal| < 2^83 and |d - a| < 2^41 per coordinate: the dot product
     // stays under 2^126. Lights spread through the run first: most nodes
     // that are not planar show it at once.
-    let n = lights.len();
     for k in [n - 1, n / 2, n / 4, 3 * n / 4].into_iter().chain(1..n) {
         if dot(normal, sub(point(k)?, a)) != 0 {
             return None;
         }
     }
     Some([first as u32, (first + b) as u32, (first + c) as u32])
+}
+
+/// Whether the four points certainly do not lie in one plane: the sign of
+/// their orientation determinant is certain, and not zero. Shewchuk's
+/// filter (*Adaptive precision floating-point arithmetic and fast robust
+/// geometric predicates*, Discrete Comput. Geom. 18, 1997, `orient3d`'s
+/// first stage): the determinant of the differences to `d`, computed in
+/// `f64`, is within `(7 + 56 eps) eps` times its permanent (the same sum
+/// of products with every term's magnitude) of the exact one, `eps =
+/// 2^-53`. The `f32` coordinates' differences and their products neither
+/// overflow nor underflow in `f64` (their magnitudes lie between `2^-447`
+/// and `2^183`, or are 0). False says nothing: the exact test decides.
+pub(super) fn certainly_not_coplanar(a: Vec3, b: Vec3, c: Vec3, d: Vec3) -> bool {
+    /// Shewchuk's `o3derrboundA`, with his `epsilon` (half an ulp of 1).
+    const BOUND: f64 = (7.0 + 56.0 * HALF_ULP) * HALF_ULP;
+    const HALF_ULP: f64 = f64::EPSILON / 2.0;
+    let d = d.as_dvec3();
+    let (a, b, c) = (a.as_dvec3() - d, b.as_dvec3() - d, c.as_dvec3() - d);
+    let (bc, cb) = (b.x * c.y, c.x * b.y);
+    let (ca, ac) = (c.x * a.y, a.x * c.y);
+    let (ab, ba) = (a.x * b.y, b.x * a.y);
+    let det = a.z * (bc - cb) + b.z * (ca - ac) + c.z * (ab - ba);
+    let permanent = (bc.abs() + cb.abs()) * a.z.abs()
+        + (ca.abs() + ac.abs()) * b.z.abs()
+        + (ab.abs() + ba.abs()) * c.z.abs();
+    det.abs() > BOUND * permanent
 }
 
 /// Whether the node's brightest channel's covariance is far from singular,
@@ -183,28 +219,35 @@ const SOLID: f64 = 1e-3;
 /// at the first coplanar node of each path: `O(n depth)` in the
 /// worst case, far less where lights leave the plane early (a check fails
 /// at the first light off it).
-pub(super) fn record_planes(tree: &mut LightTree, pool: Pool) {
+///
+/// Nodes that the statistics pass `notes` knew to hold four lights off one
+/// plane are not examined: no plane holds all their lights.
+pub(super) fn record_planes(tree: &mut LightTree, notes: &[Notes], pool: Pool) {
     tree.planes.clear();
     tree.node_planes.clear();
     if tree.nodes.is_empty() {
         return;
     }
-    let examined = |node: &Node| {
+    let examined = |i: usize, node: &Node| {
         node.light_count >= MIN_LIGHTS
             && (node.aabb.max - node.aabb.min).min_element() > 0.0
+            && !notes.get(i).is_some_and(|n| n.off_plane)
             && !clearly_solid(node)
     };
     // On a pool, every node's own plane is looked for first, side by side;
     // the pass below then takes those it would have looked for.
     let spanned = if pool.parallel() {
         let tree = &*tree;
-        pool.map(&tree.nodes, |node| {
-            if examined(node) {
+        let mut spanned = vec![None; tree.nodes.len()];
+        pool.fill(&mut spanned, |i| {
+            let node = &tree.nodes[i];
+            if examined(i, node) {
                 spanning_plane(tree, node)
             } else {
                 None
             }
-        })
+        });
+        spanned
     } else {
         Vec::new()
     };
@@ -218,7 +261,7 @@ pub(super) fn record_planes(tree: &mut LightTree, pool: Pool) {
         if plane == NO_PLANE
             && let Some(triple) = match spanned.get(i) {
                 Some(triple) => *triple,
-                None if examined(node) => spanning_plane(tree, node),
+                None if examined(i, node) => spanning_plane(tree, node),
                 None => None,
             }
         {
@@ -343,6 +386,46 @@ mod tests {
         // Lamps at one height: the boxes are flat, which settles their plane.
         let t = tree((0..2000).map(|k| Vec3::new((k % 50) as f32, (k / 50) as f32, 6.0)));
         assert!(t.planes.is_empty());
+    }
+
+    #[test]
+    fn the_float_filter_never_rejects_coplanar_points() {
+        // Points exactly in tilted planes (whole numbers below 2^24, scaled
+        // by powers of two, which keeps them there), whose `f64`
+        // determinant rounds (its products reach 2^66): the filter must
+        // leave them to the exact test.
+        let mut state = 1u64;
+        let mut next = |m: i64| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            ((state >> 33) as i64 % (2 * m + 1) - m) as f32
+        };
+        for scale in [1.0f32, 2f32.powi(-60), 2f32.powi(20), 2f32.powi(45)] {
+            for _ in 0..2000 {
+                let (p, q) = (next(7), next(7));
+                let mut point = || {
+                    let (i, j) = (next(1 << 20), next(1 << 20));
+                    Vec3::new(i, j, p * i + q * j) * scale
+                };
+                let [a, b, c, d] = [point(), point(), point(), point()];
+                assert!(!certainly_not_coplanar(a, b, c, d), "{a} {b} {c} {d}");
+            }
+        }
+        // Clearly solid, and an ulp off a plane at a coordinate of 1.
+        let one_up = f32::from_bits(1f32.to_bits() + 1);
+        assert!(certainly_not_coplanar(
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::new(0.0, 0.0, 1.0)
+        ));
+        assert!(certainly_not_coplanar(
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 1.0),
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, one_up)
+        ));
     }
 
     #[test]

@@ -47,9 +47,9 @@ impl LightTree {
         let order = &self.order;
         pool.cheap(order.len())
             .fill(&mut self.lights, |i| lights[order[i] as usize]);
-        fill_statistics(self, pool);
-        super::plane::record_planes(self, pool.cheap(lights.len()));
-        self.fill_groups(pool);
+        let mut notes = fill_statistics(self, pool);
+        super::plane::record_planes(self, &notes, pool.cheap(lights.len()));
+        self.fill_groups_noted(&mut notes, pool);
         Ok(())
     }
 }
