@@ -287,7 +287,7 @@ impl TreeBuilder {
             tree.order.clear();
             tree.planes.clear();
             tree.node_planes.clear();
-            tree.fill_groups(Pool::ONE);
+            tree.fill_groups(&mut [], Pool::ONE);
             return Ok(());
         }
         // Sort once along the Morton curve and gather the lights into that
@@ -353,7 +353,7 @@ impl TreeBuilder {
         drop(shapes);
         let mut notes = fill_statistics(tree, pool);
         super::plane::record_planes(tree, &notes, cheap);
-        tree.fill_groups_noted(&mut notes, pool);
+        tree.fill_groups(&mut notes, pool);
         Ok(())
     }
 }

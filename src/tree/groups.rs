@@ -535,15 +535,10 @@ fn relative_extent(min: f32, max: f32, c: f32) -> (f32, f32) {
 
 impl LightTree {
     /// Recomputes the node groups from the nodes (after a build or refit),
-    /// on `pool`.
-    pub(crate) fn fill_groups(&mut self, pool: Pool) {
-        self.groups.refill(&self.nodes, &self.lights, pool);
-    }
-
-    /// [`fill_groups`](Self::fill_groups) with the leaves' colour ratios
-    /// taken from the statistics pass's `notes` (one per node) rather
-    /// than read again from the lights: the same blocks.
-    pub(super) fn fill_groups_noted(&mut self, notes: &mut [Notes], pool: Pool) {
+    /// on `pool`, the leaves' colour ratios taken from the statistics
+    /// pass's `notes` (one per node) rather than read again from the
+    /// lights: the blocks [`NodeGroups::new_on`] makes.
+    pub(super) fn fill_groups(&mut self, notes: &mut [Notes], pool: Pool) {
         let spreads = spreads_from_leaves(&self.nodes, notes);
         self.groups.refill_spread(&self.nodes, &spreads, pool);
     }

@@ -49,7 +49,7 @@ impl LightTree {
             .fill(&mut self.lights, |i| lights[order[i] as usize]);
         let mut notes = fill_statistics(self, pool);
         super::plane::record_planes(self, &notes, pool.cheap(lights.len()));
-        self.fill_groups_noted(&mut notes, pool);
+        self.fill_groups(&mut notes, pool);
         Ok(())
     }
 }
