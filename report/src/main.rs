@@ -123,7 +123,11 @@ fn main() -> Result<(), Box<dyn Error>> {
     println!("{METHODS}");
     println!(
         "Time per point = fastest of up to {MAX_PASSES} passes over all points (repeated while \
-         within {} ms per configuration), divided by the number of points. Other processes \
+         within {} ms per configuration), divided by the number of points: each \
+         configuration timed with its data warm in the caches. The scaling part also times the \
+         exact sum and the tree at a certified 1% in alternating passes (medians over the rounds, \
+         the speed-up the median of the rounds' ratios): each pass then finds the other's data in \
+         the caches, and a load that drifts during the run moves both alike. Other processes \
          share the machine: expect some noise.\n",
         cfg.budget.as_millis()
     );

@@ -5,14 +5,14 @@
 use std::error::Error;
 use std::time::Duration;
 
-use manylights::{BoundKind, Lambert, Threshold, Unoccluded};
+use manylights::{BoundKind, Lambert, LightTree, Threshold, Unoccluded};
 
 use crate::config::{Config, SCALING_ABSOLUTE, SCALING_RELATIVE, SCALING_SWEEP, SEED};
 use crate::exact::SoaLights;
-use crate::measure::{Method, Record};
-use crate::scenes::{self, ShadingPoint};
+use crate::measure::{Method, Paired, Record, Sample, paired};
+use crate::scenes::{self, Scene, ShadingPoint};
 use crate::sweep::{
-    Bench, build_tree, check_soa, measure_cut, measure_soa, median, recorder, references,
+    Bench, build_tree, check_soa, measure_cut, measure_soa, median, query, recorder, references,
 };
 
 /// One size of the scaling part.
@@ -25,6 +25,55 @@ pub struct ScalingRow {
     pub memory: usize,
     /// The configurations measured at this size.
     pub records: Vec<Record>,
+    /// The exact sum (first) against the tree at the relative threshold
+    /// [`SCALING_RELATIVE`] with the tight bound (second), timed in
+    /// alternating passes.
+    pub alternating: Paired,
+}
+
+/// The exact sum and the tree at [`SCALING_RELATIVE`] (tight bound) timed
+/// in alternating passes over the points, so that a load drifting during
+/// the run moves both alike: about four budgets' worth of rounds, at least
+/// 5 and at most 41, from the times of `records`.
+fn alternate(
+    records: &[Record],
+    tree: &LightTree,
+    shader: Lambert,
+    soa: &SoaLights,
+    scene: &Scene,
+    bench: Bench<'_>,
+) -> Paired {
+    let relative = format!("t={SCALING_RELATIVE}");
+    let time = |method: Method, parameter: &str| {
+        records
+            .iter()
+            .find(|r| r.method == method && r.parameter == parameter)
+            .map_or(0.0, |r| r.measurement.seconds_per_point)
+    };
+    let pass = (time(Method::ExactSoa, "-") + time(Method::TreeRelative, &relative))
+        * bench.points.len() as f64;
+    let rounds = if pass > 0.0 {
+        (4.0 * bench.budget.as_secs_f64() / pass) as usize
+    } else {
+        5
+    };
+    let rounds = rounds.clamp(5, 41) | 1;
+    let lights = scene.lights.len() as u32;
+    let threshold = Threshold::relative(SCALING_RELATIVE);
+    let mut shading = tree.shading(shader.with_bound(BoundKind::Tight));
+    paired(
+        bench.points.len(),
+        rounds,
+        |i| {
+            let pt = &bench.points[i];
+            let radiance = soa.shade(&scene.material, pt.point, pt.normal, pt.view);
+            Sample::estimate(radiance, lights, None)
+        },
+        |i| {
+            let r = shading.shade_query(&query(&bench.points[i]), threshold, Unoccluded);
+            Sample::cut(r.expect("scene thresholds are valid"), None)
+        },
+    )
 }
 
 /// Measures the exact sum and the cut at fixed thresholds at every size of
@@ -77,11 +126,21 @@ pub fn run_scaling(cfg: &Config) -> Result<Vec<ScalingRow>, Box<dyn Error>> {
         let m = cut(BoundKind::Tight, Threshold::absolute(SCALING_ABSOLUTE));
         record(Method::TreeAbsolute, format!("abs={SCALING_ABSOLUTE}"), m);
         drop(record);
+        let alternating = alternate(&records, &tree, shader, &soa, &scene, bench);
+        println!(
+            "  alternating passes, exact sum against the tree at t={SCALING_RELATIVE}: {:.2} and \
+             {:.2} us/pt (medians), speed-up {:.1}x (median of {} rounds)",
+            alternating.first * 1e6,
+            alternating.second * 1e6,
+            1.0 / alternating.ratio,
+            alternating.rounds
+        );
         rows.push(ScalingRow {
             lights: n,
             build,
             memory: tree.memory_bytes(),
             records,
+            alternating,
         });
     }
     Ok(rows)

@@ -56,8 +56,14 @@ fn every_part_runs_and_keeps_the_bound() {
             assert_eq!(r.measurement.max_error, 0.0, "{}: the exact limit", r.scene);
         }
     }
+    for row in &scaling {
+        let a = row.alternating;
+        assert!(a.rounds >= 5 && a.rounds % 2 == 1, "{} rounds", a.rounds);
+        assert!(a.first > 0.0 && a.second > 0.0 && a.ratio > 0.0, "{a:?}");
+    }
     let text = summary(&records, &scaling, &targets);
     assert!(text.contains("## Summary"));
+    assert!(text.contains("certified, city 1000 lights, alternating passes"));
     assert!(text.contains("canopy: the tree at a certified 1%"));
 }
 
