@@ -404,42 +404,65 @@ fn insertion_sort(keys: &mut [u64], order: &mut [u32]) {
     }
 }
 
-/// Splits a run of sorted `codes` at the first octree level where they
-/// differ: the sub-runs of equal 3-bit digit at that level (2 to 8 of them,
-/// in order), or `None` when every code is equal.
-pub(super) fn children(codes: &[u64]) -> Option<smallvec::SmallVec<[core::ops::Range<usize>; 8]>> {
-    let (first, last) = (*codes.first()?, *codes.last()?);
-    let differ = first ^ last;
+/// The octree level at which two codes first differ, for [`children`]:
+/// 0 for equal codes, else one more than the index of the highest 3-bit
+/// digit in which they differ (1 to 21).
+#[inline(always)]
+fn split_level(a: u64, b: u64) -> u8 {
+    let differ = a ^ b;
     if differ == 0 {
-        return None;
+        0
+    } else {
+        ((63 - differ.leading_zeros()) / 3 + 1) as u8
     }
-    // The highest differing bit, rounded down to the start of its digit.
-    let shift = (63 - differ.leading_zeros()) / 3 * 3;
-    let digit = |c: u64| (c >> shift) & 7;
-    let mut out = smallvec::SmallVec::new();
-    let mut start = 0;
-    while start < codes.len() {
-        let d = digit(codes[start]);
-        let end = start + gallop(&codes[start..], |c| digit(c) == d);
-        out.push(start..end);
-        start = end;
-    }
-    Some(out)
 }
 
-/// The number of leading elements of `run` that satisfy `keep` (which must
-/// hold for a prefix of `run` and fail after it): an exponential search from
-/// the front, then a binary search in the last doubling, so that finding a
-/// sub-run of length `m` reads `O(log m)` codes near its start, in cache,
-/// rather than `O(log n)` spread over the whole run.
-fn gallop(run: &[u64], keep: impl Fn(u64) -> bool) -> usize {
-    let mut bound = 1;
-    while bound < run.len() && keep(run[bound]) {
-        bound *= 2;
+/// [`split_level`] of each pair of neighbours of the sorted `codes`: entry
+/// `i` for codes `i` and `i + 1` (one entry fewer than codes). One byte a
+/// code, which [`children`] scans instead of searching the codes.
+pub(crate) fn split_levels(codes: &[u64]) -> Vec<u8> {
+    codes.windows(2).map(|w| split_level(w[0], w[1])).collect()
+}
+
+/// Splits a run of sorted codes at the first octree level where they
+/// differ: the sub-runs of equal 3-bit digit at that level (2 to 8 of them,
+/// in order), or `None` when every code is equal. Reads only the run's
+/// [`split_levels`] (one fewer than its codes): the run's level is their
+/// highest, and the run is cut after each neighbour pair at that level.
+pub(super) fn children(levels: &[u8]) -> Option<smallvec::SmallVec<[core::ops::Range<usize>; 8]>> {
+    let level = levels.iter().copied().max()?;
+    if level == 0 {
+        return None;
     }
-    let low = bound / 2;
-    let high = bound.min(run.len());
-    low + run[low..high].partition_point(|&c| keep(c))
+    let mut out = smallvec::SmallVec::new();
+    let mut start = 0;
+    let mut cut = |end: usize, out: &mut smallvec::SmallVec<_>| {
+        out.push(start..end);
+        start = end;
+    };
+    // A step of levels without one equal to `level` (most of them: at most
+    // seven cuts in the run) is passed over after one test of them all,
+    // which vector instructions take.
+    const STEP: usize = 32;
+    let steps = levels.chunks_exact(STEP);
+    let rest = steps.remainder();
+    for (k, step) in steps.enumerate() {
+        if step.iter().fold(0u8, |any, &l| any | u8::from(l == level)) != 0 {
+            for (i, &l) in step.iter().enumerate() {
+                if l == level {
+                    cut(STEP * k + i + 1, &mut out);
+                }
+            }
+        }
+    }
+    let base = levels.len() - rest.len();
+    for (i, &l) in rest.iter().enumerate() {
+        if l == level {
+            cut(base + i + 1, &mut out);
+        }
+    }
+    out.push(start..levels.len() + 1);
+    Some(out)
 }
 
 #[cfg(test)]
@@ -567,8 +590,55 @@ mod tests {
             0b000_011_000,
             0b000_111_000,
         ];
-        let runs = children(&codes).unwrap();
+        let runs = children(&split_levels(&codes)).unwrap();
         assert_eq!(runs.as_slice(), &[0..2, 2..3, 3..4]);
-        assert!(children(&[7, 7, 7]).is_none());
+        assert!(children(&split_levels(&[7, 7, 7])).is_none());
+    }
+
+    /// The sub-runs of equal digit at the highest digit where the first
+    /// and last of the sorted `codes` differ, found code by code.
+    fn children_reference(codes: &[u64]) -> Option<Vec<core::ops::Range<usize>>> {
+        let differ = codes.first()? ^ codes.last()?;
+        if differ == 0 {
+            return None;
+        }
+        let shift = (63 - differ.leading_zeros()) / 3 * 3;
+        let mut out = Vec::new();
+        let mut start = 0;
+        for i in 1..=codes.len() {
+            if i == codes.len() || (codes[i] >> shift) & 7 != (codes[start] >> shift) & 7 {
+                out.push(start..i);
+                start = i;
+            }
+        }
+        Some(out)
+    }
+
+    /// The split levels give the sub-runs found code by code, on runs of
+    /// every length around the steps the scan takes, with cuts anywhere.
+    #[test]
+    fn children_match_a_reference() {
+        let mut state = 11;
+        for len in (2..=100).chain([255, 256, 257, 1000, 4096]) {
+            for trial in 0..20 {
+                let r = &mut state;
+                // Codes below a shared prefix: few distinct values, spread
+                // over a few digits, so that equal codes and cuts at
+                // several levels occur.
+                let bits = 1 + trial % 12;
+                let mut codes: Vec<u64> = (0..len)
+                    .map(|_| 0x5a5a_0000_0000_0000 | (random(r) & ((1 << bits) - 1)) << (trial % 5))
+                    .collect();
+                codes.sort_unstable();
+                let levels = split_levels(&codes);
+                assert_eq!(levels.len() + 1, codes.len());
+                let runs = children(&levels).map(|runs| runs.to_vec());
+                assert_eq!(
+                    runs,
+                    children_reference(&codes),
+                    "{len} codes, trial {trial}"
+                );
+            }
+        }
     }
 }
