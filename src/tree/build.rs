@@ -309,6 +309,12 @@ impl TreeBuilder {
         // and children of each node, and its depth); the nodes are made
         // from it in one allocation, and their statistics follow,
         // bottom-up.
+        // Each node's sub-cells are read off the levels at which
+        // neighbouring codes first differ (one byte a light, scanned in
+        // sequence) rather than searched for in the codes, whose reads at
+        // each node's ends would miss the cache.
+        let levels = morton::split_levels(&codes);
+        drop(codes);
         let mut shapes = vec![Shape {
             first_light: 0,
             light_count: n as u32,
@@ -325,7 +331,7 @@ impl TreeBuilder {
                 // The octree cell's occupied sub-cells at the first level
                 // where the codes differ; lights in one finest cell are
                 // halved at their median instead.
-                let groups = match morton::children(&codes[range.clone()]) {
+                let groups = match morton::children(&levels[range.start..range.end - 1]) {
                     Some(groups) => groups,
                     None => median_split(
                         &mut tree.lights[range.clone()],
@@ -348,7 +354,7 @@ impl TreeBuilder {
             }
             i += 1;
         }
-        drop(codes);
+        drop(levels);
         cheap.map_into(&shapes, &mut tree.nodes, Shape::node);
         drop(shapes);
         let mut notes = fill_statistics(tree, pool);

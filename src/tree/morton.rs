@@ -82,10 +82,55 @@ impl Grid {
         self.fill_codes_body(lights, out);
     }
 
+    /// [`fill_codes_body`](Self::fill_codes_body) four lights at a time,
+    /// the cells of an axis as one vector: the same subtraction, product,
+    /// clamp (`maxpd` and `minpd` keep their first operand exactly where
+    /// `DVec3::max` and `DVec3::min` keep `self`) and truncation (the
+    /// clamped values fit an `i32`), so the same codes.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn fill_codes_avx2(&self, lights: &[crate::PointLight], out: &mut [u64]) {
-        self.fill_codes_body(lights, out);
+        use core::arch::x86_64::{
+            _mm256_cvtepu32_epi64, _mm256_cvttpd_epi32, _mm256_extract_epi64, _mm256_max_pd,
+            _mm256_min_pd, _mm256_mul_pd, _mm256_or_si256, _mm256_set_pd, _mm256_set1_pd,
+            _mm256_setzero_pd, _mm256_setzero_si256, _mm256_slli_epi64, _mm256_sub_pd,
+        };
+        let top = _mm256_set1_pd(f64::from(1u32 << BITS_PER_AXIS) - 1.0);
+        let zero = _mm256_setzero_pd();
+        let scale = _mm256_set1_pd(self.scale);
+        let min = self.min.to_array();
+        let min = [
+            _mm256_set1_pd(min[0]),
+            _mm256_set1_pd(min[1]),
+            _mm256_set1_pd(min[2]),
+        ];
+        let fours = lights.chunks_exact(4);
+        let rest = fours.remainder();
+        let mut outs = out.chunks_exact_mut(4);
+        for (four, out) in fours.zip(&mut outs) {
+            let mut cells = [_mm256_setzero_si256(); 3];
+            for axis in 0..3 {
+                let p = _mm256_set_pd(
+                    f64::from(four[3].position[axis]),
+                    f64::from(four[2].position[axis]),
+                    f64::from(four[1].position[axis]),
+                    f64::from(four[0].position[axis]),
+                );
+                let q = _mm256_mul_pd(_mm256_sub_pd(p, min[axis]), scale);
+                let c = _mm256_cvttpd_epi32(_mm256_min_pd(_mm256_max_pd(q, zero), top));
+                // At most 21 bits: the same as the `u32` of `code`.
+                cells[axis] = spread_lanes(_mm256_cvtepu32_epi64(c));
+            }
+            let codes = _mm256_or_si256(
+                _mm256_or_si256(cells[0], _mm256_slli_epi64::<1>(cells[1])),
+                _mm256_slli_epi64::<2>(cells[2]),
+            );
+            out[0] = _mm256_extract_epi64::<0>(codes) as u64;
+            out[1] = _mm256_extract_epi64::<1>(codes) as u64;
+            out[2] = _mm256_extract_epi64::<2>(codes) as u64;
+            out[3] = _mm256_extract_epi64::<3>(codes) as u64;
+        }
+        self.fill_codes_body(rest, outs.into_remainder());
     }
 
     #[inline(always)]
@@ -94,6 +139,38 @@ impl Grid {
             *o = self.code(l.position);
         }
     }
+}
+
+/// [`spread`] of each of four lanes.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn spread_lanes(x: core::arch::x86_64::__m256i) -> core::arch::x86_64::__m256i {
+    use core::arch::x86_64::{
+        _mm256_and_si256, _mm256_or_si256, _mm256_set1_epi64x, _mm256_slli_epi64,
+    };
+    let mask = |m: u64| _mm256_set1_epi64x(m as i64);
+    let x = _mm256_and_si256(x, mask(0x1f_ffff));
+    let x = _mm256_and_si256(
+        _mm256_or_si256(x, _mm256_slli_epi64::<32>(x)),
+        mask(0x1f_0000_0000_ffff),
+    );
+    let x = _mm256_and_si256(
+        _mm256_or_si256(x, _mm256_slli_epi64::<16>(x)),
+        mask(0x1f_0000_ff00_00ff),
+    );
+    let x = _mm256_and_si256(
+        _mm256_or_si256(x, _mm256_slli_epi64::<8>(x)),
+        mask(0x100f_00f0_0f00_f00f),
+    );
+    let x = _mm256_and_si256(
+        _mm256_or_si256(x, _mm256_slli_epi64::<4>(x)),
+        mask(0x10c3_0c30_c30c_30c3),
+    );
+    _mm256_and_si256(
+        _mm256_or_si256(x, _mm256_slli_epi64::<2>(x)),
+        mask(0x1249_2492_4924_9249),
+    )
 }
 
 /// The 21 low bits of `v`, two zero bits inserted after each.
@@ -404,42 +481,65 @@ fn insertion_sort(keys: &mut [u64], order: &mut [u32]) {
     }
 }
 
-/// Splits a run of sorted `codes` at the first octree level where they
-/// differ: the sub-runs of equal 3-bit digit at that level (2 to 8 of them,
-/// in order), or `None` when every code is equal.
-pub(super) fn children(codes: &[u64]) -> Option<smallvec::SmallVec<[core::ops::Range<usize>; 8]>> {
-    let (first, last) = (*codes.first()?, *codes.last()?);
-    let differ = first ^ last;
+/// The octree level at which two codes first differ, for [`children`]:
+/// 0 for equal codes, else one more than the index of the highest 3-bit
+/// digit in which they differ (1 to 21).
+#[inline(always)]
+fn split_level(a: u64, b: u64) -> u8 {
+    let differ = a ^ b;
     if differ == 0 {
-        return None;
+        0
+    } else {
+        ((63 - differ.leading_zeros()) / 3 + 1) as u8
     }
-    // The highest differing bit, rounded down to the start of its digit.
-    let shift = (63 - differ.leading_zeros()) / 3 * 3;
-    let digit = |c: u64| (c >> shift) & 7;
-    let mut out = smallvec::SmallVec::new();
-    let mut start = 0;
-    while start < codes.len() {
-        let d = digit(codes[start]);
-        let end = start + gallop(&codes[start..], |c| digit(c) == d);
-        out.push(start..end);
-        start = end;
-    }
-    Some(out)
 }
 
-/// The number of leading elements of `run` that satisfy `keep` (which must
-/// hold for a prefix of `run` and fail after it): an exponential search from
-/// the front, then a binary search in the last doubling, so that finding a
-/// sub-run of length `m` reads `O(log m)` codes near its start, in cache,
-/// rather than `O(log n)` spread over the whole run.
-fn gallop(run: &[u64], keep: impl Fn(u64) -> bool) -> usize {
-    let mut bound = 1;
-    while bound < run.len() && keep(run[bound]) {
-        bound *= 2;
+/// [`split_level`] of each pair of neighbours of the sorted `codes`: entry
+/// `i` for codes `i` and `i + 1` (one entry fewer than codes). One byte a
+/// code, which [`children`] scans instead of searching the codes.
+pub(crate) fn split_levels(codes: &[u64]) -> Vec<u8> {
+    codes.windows(2).map(|w| split_level(w[0], w[1])).collect()
+}
+
+/// Splits a run of sorted codes at the first octree level where they
+/// differ: the sub-runs of equal 3-bit digit at that level (2 to 8 of them,
+/// in order), or `None` when every code is equal. Reads only the run's
+/// [`split_levels`] (one fewer than its codes): the run's level is their
+/// highest, and the run is cut after each neighbour pair at that level.
+pub(super) fn children(levels: &[u8]) -> Option<smallvec::SmallVec<[core::ops::Range<usize>; 8]>> {
+    let level = levels.iter().copied().max()?;
+    if level == 0 {
+        return None;
     }
-    let low = bound / 2;
-    let high = bound.min(run.len());
-    low + run[low..high].partition_point(|&c| keep(c))
+    let mut out = smallvec::SmallVec::new();
+    let mut start = 0;
+    let mut cut = |end: usize, out: &mut smallvec::SmallVec<_>| {
+        out.push(start..end);
+        start = end;
+    };
+    // A step of levels without one equal to `level` (most of them: at most
+    // seven cuts in the run) is passed over after one test of them all,
+    // which vector instructions take.
+    const STEP: usize = 32;
+    let steps = levels.chunks_exact(STEP);
+    let rest = steps.remainder();
+    for (k, step) in steps.enumerate() {
+        if step.iter().fold(0u8, |any, &l| any | u8::from(l == level)) != 0 {
+            for (i, &l) in step.iter().enumerate() {
+                if l == level {
+                    cut(STEP * k + i + 1, &mut out);
+                }
+            }
+        }
+    }
+    let base = levels.len() - rest.len();
+    for (i, &l) in rest.iter().enumerate() {
+        if l == level {
+            cut(base + i + 1, &mut out);
+        }
+    }
+    out.push(start..levels.len() + 1);
+    Some(out)
 }
 
 #[cfg(test)]
@@ -450,6 +550,48 @@ mod tests {
     fn spread_interleaves() {
         assert_eq!(spread(0b111), 0b1001001);
         assert_eq!(spread(0x1f_ffff).count_ones(), 21);
+    }
+
+    /// The codes of many lights at once (four at a time where the
+    /// processor has AVX2) are the codes one by one, and so are the
+    /// baseline copy's: on the box's corners and faces, outside the box
+    /// (clamped), at `-0`, and on runs of every length up to two steps.
+    #[test]
+    fn codes_of_lights_are_the_codes_one_by_one() {
+        let mut state = 5;
+        let scene = Aabb {
+            min: Vec3::new(-3.0, 0.0, 1.0e-3),
+            max: Vec3::new(250.0, 1.0e4, 2.5),
+        };
+        let mut coordinate = |axis: usize| {
+            let (lo, hi) = (scene.min[axis], scene.max[axis]);
+            match random(&mut state) % 8 {
+                0 => lo,
+                1 => hi,
+                2 => -0.0,
+                3 => lo - 1.0,
+                4 => hi * 2.0,
+                _ => lo + (hi - lo) * (random(&mut state) >> 40) as f32 / (1u64 << 24) as f32,
+            }
+        };
+        let lights: Vec<crate::PointLight> = (0..1000)
+            .map(|_| {
+                let p = Vec3::new(coordinate(0), coordinate(1), coordinate(2));
+                crate::PointLight::new(p, Vec3::ONE)
+            })
+            .collect();
+        for grid in [
+            Grid::over(scene),
+            Grid::over(Aabb::EMPTY.union_point(Vec3::ONE)),
+        ] {
+            for len in (0..=9).chain([1000]) {
+                let lights = &lights[..len];
+                let one_by_one: Vec<u64> = lights.iter().map(|l| grid.code(l.position)).collect();
+                assert_eq!(grid.codes_of(lights, Pool::ONE), one_by_one);
+                let baseline = crate::dispatch::baseline(|| grid.codes_of(lights, Pool::ONE));
+                assert_eq!(baseline, one_by_one);
+            }
+        }
     }
 
     #[test]
@@ -567,8 +709,55 @@ mod tests {
             0b000_011_000,
             0b000_111_000,
         ];
-        let runs = children(&codes).unwrap();
+        let runs = children(&split_levels(&codes)).unwrap();
         assert_eq!(runs.as_slice(), &[0..2, 2..3, 3..4]);
-        assert!(children(&[7, 7, 7]).is_none());
+        assert!(children(&split_levels(&[7, 7, 7])).is_none());
+    }
+
+    /// The sub-runs of equal digit at the highest digit where the first
+    /// and last of the sorted `codes` differ, found code by code.
+    fn children_reference(codes: &[u64]) -> Option<Vec<core::ops::Range<usize>>> {
+        let differ = codes.first()? ^ codes.last()?;
+        if differ == 0 {
+            return None;
+        }
+        let shift = (63 - differ.leading_zeros()) / 3 * 3;
+        let mut out = Vec::new();
+        let mut start = 0;
+        for i in 1..=codes.len() {
+            if i == codes.len() || (codes[i] >> shift) & 7 != (codes[start] >> shift) & 7 {
+                out.push(start..i);
+                start = i;
+            }
+        }
+        Some(out)
+    }
+
+    /// The split levels give the sub-runs found code by code, on runs of
+    /// every length around the steps the scan takes, with cuts anywhere.
+    #[test]
+    fn children_match_a_reference() {
+        let mut state = 11;
+        for len in (2..=100).chain([255, 256, 257, 1000, 4096]) {
+            for trial in 0..20 {
+                let r = &mut state;
+                // Codes below a shared prefix: few distinct values, spread
+                // over a few digits, so that equal codes and cuts at
+                // several levels occur.
+                let bits = 1 + trial % 12;
+                let mut codes: Vec<u64> = (0..len)
+                    .map(|_| 0x5a5a_0000_0000_0000 | (random(r) & ((1 << bits) - 1)) << (trial % 5))
+                    .collect();
+                codes.sort_unstable();
+                let levels = split_levels(&codes);
+                assert_eq!(levels.len() + 1, codes.len());
+                let runs = children(&levels).map(|runs| runs.to_vec());
+                assert_eq!(
+                    runs,
+                    children_reference(&codes),
+                    "{len} codes, trial {trial}"
+                );
+            }
+        }
     }
 }
