@@ -513,9 +513,14 @@ pub(super) fn children(levels: &[u8]) -> Option<smallvec::SmallVec<[core::ops::R
     }
     let mut out = smallvec::SmallVec::new();
     let mut start = 0;
-    let mut cut = |end: usize, out: &mut smallvec::SmallVec<_>| {
-        out.push(start..end);
-        start = end;
+    // Cuts after each pair of `step` at `level`, `base` the step's start.
+    let mut cut_in = |base: usize, step: &[u8]| {
+        for (i, &l) in step.iter().enumerate() {
+            if l == level {
+                out.push(start..base + i + 1);
+                start = base + i + 1;
+            }
+        }
     };
     // A step of levels without one equal to `level` (most of them: at most
     // seven cuts in the run) is passed over after one test of them all,
@@ -525,19 +530,10 @@ pub(super) fn children(levels: &[u8]) -> Option<smallvec::SmallVec<[core::ops::R
     let rest = steps.remainder();
     for (k, step) in steps.enumerate() {
         if step.iter().fold(0u8, |any, &l| any | u8::from(l == level)) != 0 {
-            for (i, &l) in step.iter().enumerate() {
-                if l == level {
-                    cut(STEP * k + i + 1, &mut out);
-                }
-            }
+            cut_in(STEP * k, step);
         }
     }
-    let base = levels.len() - rest.len();
-    for (i, &l) in rest.iter().enumerate() {
-        if l == level {
-            cut(base + i + 1, &mut out);
-        }
-    }
+    cut_in(levels.len() - rest.len(), rest);
     out.push(start..levels.len() + 1);
     Some(out)
 }
