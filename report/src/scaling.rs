@@ -13,6 +13,7 @@ use crate::measure::{Method, Paired, Record, Sample, paired};
 use crate::scenes::{self, Scene, ShadingPoint};
 use crate::sweep::{
     Bench, build_tree, check_soa, measure_cut, measure_soa, median, query, recorder, references,
+    soa_sample,
 };
 
 /// One size of the scaling part.
@@ -58,17 +59,12 @@ fn alternate(
         5
     };
     let rounds = rounds.clamp(5, 41) | 1;
-    let lights = scene.lights.len() as u32;
     let threshold = Threshold::relative(SCALING_RELATIVE);
     let mut shading = tree.shading(shader.with_bound(BoundKind::Tight));
     paired(
         bench.points.len(),
         rounds,
-        |i| {
-            let pt = &bench.points[i];
-            let radiance = soa.shade(&scene.material, pt.point, pt.normal, pt.view);
-            Sample::estimate(radiance, lights, None)
-        },
+        |i| soa_sample(soa, scene, &bench.points[i]),
         |i| {
             let r = shading.shade_query(&query(&bench.points[i]), threshold, Unoccluded);
             Sample::cut(r.expect("scene thresholds are valid"), None)

@@ -126,12 +126,15 @@ pub fn check_soa(
 
 /// The vectorized exact sum over every light, measured.
 pub fn measure_soa(soa: &SoaLights, scene: &Scene, bench: Bench<'_>) -> Measurement {
-    let lights = scene.lights.len() as u32;
     measure(bench.refs, bench.budget, |i| {
-        let pt = &bench.points[i];
-        let radiance = soa.shade(&scene.material, pt.point, pt.normal, pt.view);
-        Sample::estimate(radiance, lights, None)
+        soa_sample(soa, scene, &bench.points[i])
     })
+}
+
+/// The vectorized exact sum at `pt`, as a sample (its cost: every light).
+pub fn soa_sample(soa: &SoaLights, scene: &Scene, pt: &ShadingPoint) -> Sample {
+    let radiance = soa.shade(&scene.material, pt.point, pt.normal, pt.view);
+    Sample::estimate(radiance, scene.lights.len() as u32, None)
 }
 
 /// The median of `v`.
