@@ -178,7 +178,9 @@ pub const DOT2_ACCEPT: f64 = 128.0 * f64::EPSILON;
 /// besides its numerator's relative error (kept below `2^-41 / e`, see
 /// [`NAIVE_DOT_ACCEPT`]), about `11u` (`5u` from `|R| = |N|^2 |V|`, `4u`
 /// from `d`, two roundings), and the lobe `exp(e ln cos)` `e` times all
-/// that: below `2^-41 + 512 * 11u`, about `1.1e-12`, for `e <= 512`. Above
+/// that: below `2^-41 + 512 * 11u`, about `1.1e-12`, for `e <= 512` (an
+/// integer exponent's power by repeated multiplication adds at most
+/// `(e - 1) u`). Above
 /// it, near the axis, where the lobe of a large exponent lives, that would
 /// reach `1e-9` at `e = 1e6`; `1 - cos` from the sine has a relative error of
 /// about `30u`, and the lobe then `|e ln cos| 30u`, at most about `4e-12`

@@ -43,7 +43,9 @@ const LOBE_LOG_SPACE_BELOW: f64 = 1e-280;
 /// taken in plain `f64` only while that error times `e` stays below
 /// `2^-40` (compensated otherwise, within an ulp), `|R|` and `d` adding
 /// about 10 ulps; for `e <= 512` the lobe inherits `e` times that, below
-/// about `1.3e-12`. Above
+/// about `1.3e-12`, and an integer exponent up to 512 takes the power by
+/// repeated multiplication, at most `e - 1` roundings more (`5.7e-14` at
+/// 512; other exponents take `exp(e ln cos)`). Above
 /// ([`PHONG_SINE_ROUTE_ABOVE`](crate::numeric::PHONG_SINE_ROUTE_ABOVE)),
 /// lights near the axis take `1 - cos = sin^2 / (1 + cos)` from a
 /// compensated cross product, which makes the lobe's relative error about
@@ -70,7 +72,10 @@ const LOBE_LOG_SPACE_BELOW: f64 = 1e-280;
 /// ([`Aabb::distance_range`](crate::Aabb::distance_range), rounded outward). The estimate is the
 /// virtual light `I ks max(0, cos alpha_c)^e / D^2`. The power is taken in log
 /// space when it would underflow, so no bound is lost to a `cos^e` that
-/// flushed to zero while `I/d^2` is large. Exponents `0 <= e <= 1e6`.
+/// flushed to zero while `I/d^2` is large; for an integer exponent up to
+/// 512 it is otherwise taken by repeated multiplication, and both ends
+/// move outward by `e f64::EPSILON`, twice its rounding. Exponents
+/// `0 <= e <= 1e6`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Phong {
     ks: DVec3,
@@ -141,6 +146,15 @@ impl Phong {
         self.exponent
     }
 
+    /// The exponent as an integer if it is one of at most
+    /// [`PHONG_SINE_ROUTE_ABOVE`] (the lobes [`eval`](Shader::eval) takes
+    /// by repeated multiplication).
+    #[inline]
+    fn small_integer_exponent(&self) -> Option<u32> {
+        let n = self.exponent as u32;
+        (f64::from(n) == self.exponent && self.exponent <= PHONG_SINE_ROUTE_ABOVE).then_some(n)
+    }
+
     /// `scale * max(0, cos)^e` per channel, without losing a product that is
     /// representable to an underflowing power.
     #[inline]
@@ -150,6 +164,12 @@ impl Phong {
         }
         if self.exponent == 0.0 {
             return scale;
+        }
+        if let Some(n) = self.small_integer_exponent() {
+            let lobe = power(cos, n);
+            if lobe >= LOBE_LOG_SPACE_BELOW {
+                return scale * lobe;
+            }
         }
         self.lobe_from_log(scale, self.exponent * cos.ln())
     }
@@ -330,6 +350,15 @@ impl Shader for Phong {
         }
         let length_times_d = mirror.unnormalized_length * d2.sqrt();
         let cos = along / length_times_d;
+        if let Some(n) = self.small_integer_exponent() {
+            // Repeated multiplication instead of `exp(e ln cos)`: at most
+            // `e - 1` roundings, and no lobe that underflows (those take the
+            // log route below).
+            let lobe = power(cos, n);
+            if lobe >= LOBE_LOG_SPACE_BELOW {
+                return scale * lobe;
+            }
+        }
         let log_cos = if cos > 0.5 && self.exponent > PHONG_SINE_ROUTE_ABOVE {
             // Near the axis of a narrow lobe: ln cos = ln(1 - t) with
             // t = 1 - cos = sin^2 / (1 + cos), accurate however small.
@@ -356,10 +385,17 @@ impl Shader for Phong {
         let (box_near, box_far) = node.aabb.distance_range(surface.point);
         let near_falloff = cone.near_falloff().min(square(cone.distance / box_near));
         let far_falloff = cone.far_falloff().max(square(cone.distance / box_far));
+        // A lobe by repeated multiplication is within `(e - 1) u` of
+        // itself (see `power`): the ends move outward by `2 e u`.
+        let widen = if self.small_integer_exponent().is_some() {
+            self.exponent * f64::EPSILON
+        } else {
+            0.0
+        };
         NodeEstimate::new(
             self.lobe(scale, r.dot(cone.axis)),
-            self.lobe(scale * far_falloff, cos_lo),
-            self.lobe(scale * near_falloff, cos_hi),
+            self.lobe(scale * far_falloff, cos_lo) * (1.0 - widen),
+            self.lobe(scale * near_falloff, cos_hi) * (1.0 + widen),
         )
     }
 }
@@ -367,4 +403,75 @@ impl Shader for Phong {
 #[inline]
 fn square(x: f64) -> f64 {
     x * x
+}
+
+/// `x^n` for `n >= 1` by binary powering: one rounding per multiplication,
+/// and a product of two powers with relative errors of at most `(a - 1) u`
+/// and `(b - 1) u` has at most `(a + b - 1) u` (to first order, `u =
+/// 2^-53`), so `x^n` is within `(n - 1) u` of itself. For `x <= 1` every
+/// power taken on the way is at least `x^n`: none underflows unless the
+/// result does.
+#[inline]
+fn power(mut x: f64, mut n: u32) -> f64 {
+    let mut out = 1.0;
+    loop {
+        if n & 1 == 1 {
+            out *= x;
+        }
+        n >>= 1;
+        if n == 0 {
+            return out;
+        }
+        x *= x;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::power;
+
+    /// `a b` in double-double arithmetic: `(hi, lo)` with `hi + lo` within
+    /// a few `u^2` of the exact product, relatively.
+    fn mul(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+        let p = a.0 * b.0;
+        let e = a.0.mul_add(b.0, -p) + (a.0 * b.1 + a.1 * b.0);
+        let hi = p + e;
+        (hi, e - (hi - p))
+    }
+
+    /// `x^n` in double-double arithmetic: within about `n u^2` of itself.
+    fn reference(x: f64, n: u32) -> f64 {
+        let (mut out, mut square, mut k) = ((1.0, 0.0), (x, 0.0), n);
+        while k > 0 {
+            if k & 1 == 1 {
+                out = mul(out, square);
+            }
+            square = mul(square, square);
+            k >>= 1;
+        }
+        out.0 + out.1
+    }
+
+    proptest::proptest! {
+        /// Binary powering stays within `(n - 1) u` of the power, `u =
+        /// 2^-53`, as the lobe's error budget and the node bound's widening
+        /// assume (cosines up to a few ulps above 1 included).
+        #[test]
+        fn power_is_within_n_minus_one_roundings(
+            x in 0.25f64..=1.0 + 4.0 * f64::EPSILON,
+            n in 1u32..=512,
+        ) {
+            let exact = reference(x, n);
+            // Smaller lobes take the log route (`LOBE_LOG_SPACE_BELOW`).
+            if exact < super::LOBE_LOG_SPACE_BELOW {
+                return Ok(());
+            }
+            let u = f64::EPSILON / 2.0;
+            let allowed = f64::from(n - 1) * u * exact * (1.0 + 1e-6);
+            proptest::prop_assert!(
+                (power(x, n) - exact).abs() <= allowed,
+                "{x}^{n}: {} against {exact}", power(x, n)
+            );
+        }
+    }
 }

@@ -190,7 +190,9 @@ pub trait Shader {
     /// `error` is at most `1/32` of the target times `sum`, channel by
     /// channel; the errors join the reported bound, so they take at most
     /// a thirty-second of the target. The default returns `None`.
-    /// [`Lambert`] sums in `f32`, eight lights side by side.
+    /// [`Lambert`] sums in `f32`, eight lights side by side; a sum of
+    /// shaders ([`Combined`]) where either term does, the other term adding
+    /// its [`sum_lights`](Self::sum_lights).
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
@@ -227,7 +229,8 @@ pub trait Shader {
     /// bounds in `f64` from then on. [`Lambert`] with its default
     /// [`BoundKind::Series`](crate::BoundKind::Series) bounds the children
     /// side by side in one vector of four or eight `f32` lanes; a sum of shaders
-    /// ([`Combined`]) does where both of its terms do.
+    /// ([`Combined`]) does where either of its terms does, the other term
+    /// bounding each child as [`bound`](Self::bound) does.
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
@@ -330,6 +333,66 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         self.first.eval(&point.0, surface, x, i) + self.second.eval(&point.1, surface, x, i)
     }
 
+    /// Each term's [`eval_lights`](Shader::eval_lights), added light by
+    /// light: the same values as [`eval`](Shader::eval).
+    #[inline]
+    fn eval_lights(
+        &self,
+        p: &Self::PerPoint,
+        s: &Surface,
+        lights: &[PointLight],
+        out: &mut [DVec3],
+    ) {
+        let n = lights.len().min(out.len());
+        let (lights, out) = (&lights[..n], &mut out[..n]);
+        self.first.eval_lights(&p.0, s, lights, out);
+        let mut second = [DVec3::ZERO; SUM_LIGHTS_MAX];
+        for (lights, out) in lights
+            .chunks(SUM_LIGHTS_MAX)
+            .zip(out.chunks_mut(SUM_LIGHTS_MAX))
+        {
+            let second = &mut second[..lights.len()];
+            self.second.eval_lights(&p.1, s, lights, second);
+            for (a, b) in out.iter_mut().zip(second.iter()) {
+                *a += *b;
+            }
+        }
+    }
+
+    /// The two terms' [`sum_lights`](Shader::sum_lights), added.
+    #[inline]
+    fn sum_lights(&self, p: &Self::PerPoint, s: &Surface, lights: &[PointLight]) -> DVec3 {
+        self.first.sum_lights(&p.0, s, lights) + self.second.sum_lights(&p.1, s, lights)
+    }
+
+    /// Coarse where a term has a coarse sum, the other term's
+    /// [`sum_lights`](Shader::sum_lights) where it has none (Phong beside
+    /// a coarse Lambert), added; `None` where neither term has one. The
+    /// error is the coarse sums' plus `f64::EPSILON` of the total for the
+    /// last addition.
+    #[inline]
+    fn sum_lights_coarse(
+        &self,
+        p: &Self::PerPoint,
+        s: &Surface,
+        lights: &[PointLight],
+    ) -> Option<(DVec3, DVec3)> {
+        let first = self.first.sum_lights_coarse(&p.0, s, lights);
+        let second = self.second.sum_lights_coarse(&p.1, s, lights);
+        let plain = |sum: &dyn Fn(&[PointLight]) -> DVec3| {
+            let total = lights.chunks(SUM_LIGHTS_MAX).map(sum).sum::<DVec3>();
+            (total, DVec3::ZERO)
+        };
+        let (a, b) = match (first, second) {
+            (None, None) => return None,
+            (Some(a), Some(b)) => (a, b),
+            (Some(a), None) => (a, plain(&|l| self.second.sum_lights(&p.1, s, l))),
+            (None, Some(b)) => (plain(&|l| self.first.sum_lights(&p.0, s, l)), b),
+        };
+        let sum = a.0 + b.0;
+        Some((sum, a.1 + b.1 + sum * f64::EPSILON))
+    }
+
     /// The sum of the two intervals, for per-point data `p` and surface `s`.
     #[inline]
     fn bound(&self, p: &Self::PerPoint, s: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
@@ -367,9 +430,11 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         }
     }
 
-    /// Diffuse when both terms are: the albedos add.
-    /// Both terms' coarse bounds, added child by child (`None` where
-    /// either gives none); `false` unless both terms have them.
+    /// Both terms' bounds, added child by child (`None` where either gives
+    /// none): coarse where a term has coarse bounds, the other term's
+    /// [`bound`](Shader::bound) under each child's cone where it has none
+    /// (Phong beside a coarse Lambert); `false` where neither term has
+    /// them.
     #[inline]
     fn bound_children_coarse(
         &self,
@@ -380,34 +445,59 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         wanted: u8,
         out: &mut [Option<NodeEstimate>],
     ) -> bool {
+        let len = out.len().min(crate::tree::MAX_CHILDREN);
+        let mut first = [None; crate::tree::MAX_CHILDREN];
         let mut second = [None; crate::tree::MAX_CHILDREN];
-        let len = out.len().min(second.len());
-        // The second term first, into scratch, so that `out` is left alone
-        // if either term has no coarse bounds.
-        if !self
-            .second
-            .bound_children_coarse(&p.1, s, tree, parent, wanted, &mut second[..len])
-            || !self
-                .first
-                .bound_children_coarse(&p.0, s, tree, parent, wanted, &mut out[..len])
-        {
+        // Into scratch, so that `out` is left alone if neither term has
+        // coarse bounds.
+        let first_coarse =
+            self.first
+                .bound_children_coarse(&p.0, s, tree, parent, wanted, &mut first[..len]);
+        let second_coarse =
+            self.second
+                .bound_children_coarse(&p.1, s, tree, parent, wanted, &mut second[..len]);
+        if !first_coarse && !second_coarse {
             return false;
         }
-        for (i, (a, b)) in out.iter_mut().zip(second).enumerate() {
-            if wanted & (1 << i) != 0 {
-                *a = match (*a, b) {
-                    (Some(a), Some(b)) => Some(NodeEstimate {
-                        estimate: a.estimate + b.estimate,
-                        lower: a.lower + b.lower,
-                        upper: a.upper + b.upper,
-                    }),
-                    _ => None,
-                };
+        let Some(node) = tree.nodes().get(parent) else {
+            return false;
+        };
+        let children = &tree.nodes()[node.children()];
+        for (i, child) in children.iter().enumerate().take(len) {
+            if wanted & (1 << i) == 0 {
+                continue;
             }
+            // The term without coarse bounds, as `bound_nodes` would give
+            // it: no cone (a ball reaching the point) leaves the child
+            // without a bound.
+            let cone = if first_coarse && second_coarse {
+                None
+            } else {
+                child.cone(s.point)
+            };
+            let a = if first_coarse {
+                first[i]
+            } else {
+                cone.map(|c| self.first.bound(&p.0, s, child, &c))
+            };
+            let b = if second_coarse {
+                second[i]
+            } else {
+                cone.map(|c| self.second.bound(&p.1, s, child, &c))
+            };
+            out[i] = match (a, b) {
+                (Some(a), Some(b)) => Some(NodeEstimate {
+                    estimate: a.estimate + b.estimate,
+                    lower: a.lower + b.lower,
+                    upper: a.upper + b.upper,
+                }),
+                _ => None,
+            };
         }
         true
     }
 
+    /// Diffuse when both terms are: the albedos add.
     #[inline]
     fn diffuse_albedo(&self) -> Option<DVec3> {
         Some(self.first.diffuse_albedo()? + self.second.diffuse_albedo()?)

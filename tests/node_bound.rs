@@ -17,7 +17,8 @@ mod common;
 use common::cases;
 use glam::{DVec3, Vec3};
 use manylights::{
-    BoundKind, Lambert, LightTree, NodeEstimate, PointLight, ShadeResult, Shader, Surface,
+    BoundKind, Combined, Cone, Lambert, LightTree, NodeEstimate, Phong, PointLight, ShadeResult,
+    Shader, Surface,
 };
 use proptest::prelude::*;
 
@@ -246,9 +247,10 @@ fn exact(shader: &Lambert, surface: &Surface, tree: &LightTree, node: usize) -> 
         .sum()
 }
 
-/// Checks one node bound against the exact sum; returns false when the
-/// configuration has no cone (the point is too close to the ball).
-fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<bool, TestCaseError> {
+/// The node, its cone and the shading surface (no view) of `view`; `None`
+/// when the configuration has no cone (the point is too close to the ball)
+/// or no valid normal.
+fn place_view(tree: &LightTree, view: &View) -> Option<(usize, Cone, Surface)> {
     let index = view.node.index(tree.nodes().len());
     let node = &tree.nodes()[index];
     let c = node.centroid().as_dvec3();
@@ -266,15 +268,21 @@ fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<boo
         (line * f64::from(view.along) + view.direction * 10f64.powf(view.aim)).normalize()
     };
     let point = (c + direction * d).as_vec3();
-    let Some(cone) = node.cone(point.as_dvec3()) else {
-        return Ok(false);
-    };
+    let cone = node.cone(point.as_dvec3())?;
     // The normal as a caller gives it (f32), so grazing normals are grazing
     // to f32 precision.
     let given = normal(view, cone.axis, cone.sin_half_angle).as_vec3();
-    let Ok(surface) = Surface::new(point, given, None) else {
+    let surface = Surface::new(point, given, None).ok()?;
+    Some((index, cone, surface))
+}
+
+/// Checks one node bound against the exact sum; returns false when the
+/// configuration has no cone (the point is too close to the ball).
+fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<bool, TestCaseError> {
+    let Some((index, cone, surface)) = place_view(tree, view) else {
         return Ok(false);
     };
+    let node = &tree.nodes()[index];
     let shader = Lambert::new(kd).with_bound(kind);
     let bound = shader.bound(&(), &surface, node, &cone);
     let exact = exact(&shader, &surface, tree, index);
@@ -394,6 +402,99 @@ proptest! {
             for kind in [BoundKind::Series, BoundKind::Taylor, BoundKind::Paper] {
                 check(&tree, v, kind, kd)?;
             }
+        }
+    }
+}
+
+/// The coarse bound of a sum of shaders whose second term has no coarse
+/// bound of its own (Phong): Lambert's coarse interval plus Phong's `f64`
+/// bound under the child's cone, child `index` bounded through its parent,
+/// which holds the exact sum of both terms.
+fn check_combined_coarse(
+    tree: &LightTree,
+    view: &View,
+    kd: Vec3,
+    (ks, exponent): (Vec3, f32),
+    eye: DVec3,
+) -> Result<(), TestCaseError> {
+    let Some((index, cone, surface)) = place_view(tree, view) else {
+        return Ok(());
+    };
+    let Some(parent) = tree
+        .nodes()
+        .iter()
+        .position(|n| n.children().contains(&index))
+    else {
+        return Ok(());
+    };
+    let Ok(surface) = surface.with_view(eye.as_vec3()) else {
+        return Ok(());
+    };
+    let lane = index - tree.nodes()[parent].children().start;
+    let (lambert, phong) = (Lambert::new(kd), Phong::new(ks, exponent));
+    let combined = Combined::new(lambert, phong);
+    let at = combined.prepare(&surface);
+    let mut out = [None; 8];
+    prop_assert!(combined.bound_children_coarse(&at, &surface, tree, parent, 1 << lane, &mut out));
+    let mut diffuse = [None; 8];
+    prop_assert!(lambert.bound_children_coarse(
+        &(),
+        &surface,
+        tree,
+        parent,
+        1 << lane,
+        &mut diffuse
+    ));
+    let node = &tree.nodes()[index];
+    let (a, bound) = match (diffuse[lane], out[lane]) {
+        (None, None) => return Ok(()),
+        (Some(a), Some(bound)) => (a, bound),
+        (a, bound) => {
+            prop_assert!(false, "Lambert's coarse bound {a:?}, the sum's {bound:?}");
+            return Ok(());
+        }
+    };
+    let b = phong.bound(&at.1, &surface, node, &cone);
+    prop_assert_eq!(bound.estimate, a.estimate + b.estimate);
+    prop_assert_eq!(bound.lower, a.lower + b.lower);
+    prop_assert_eq!(bound.upper, a.upper + b.upper);
+    let exact: DVec3 = tree.lights()[node.lights()]
+        .iter()
+        .map(|l| combined.eval(&at, &surface, l.position.as_dvec3(), l.intensity.as_dvec3()))
+        .sum();
+    for k in 0..3 {
+        let allowance = ShadeResult::ROUNDING_ALLOWANCE * exact[k];
+        prop_assert!(
+            bound.lower[k] <= exact[k] + allowance && exact[k] <= bound.upper[k] + allowance,
+            "channel {k}: exact {:e} outside [{:e}, {:e}] (node {index}, e = {exponent})",
+            exact[k],
+            bound.lower[k],
+            bound.upper[k],
+        );
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(cases(64))]
+
+    /// Lambert's coarse bound beside Phong's (which has none of its own)
+    /// in a sum of shaders contains the exact sum of both terms, for
+    /// exponents taken by repeated multiplication (integers up to 512) and
+    /// in log space.
+    #[test]
+    fn combined_coarse_bound_contains_exact_sum(
+        lights in light_set(),
+        views in prop::collection::vec((view(), unit()), 1..=12),
+        kd in (0.0f32..=1.0, 0.0f32..=1.0, 0.0f32..=1.0),
+        ks in (0.0f32..=1.0, 0.0f32..=1.0, 0.0f32..=1.0),
+        exponent in prop::sample::select(vec![0.0f32, 1.0, 2.0, 7.0, 100.0, 512.0, 37.5, 513.0, 1e4, 1e6]),
+    ) {
+        let tree = LightTree::build(&lights).unwrap();
+        let kd = Vec3::new(kd.0, kd.1, kd.2);
+        let ks = Vec3::new(ks.0, ks.1, ks.2);
+        for (v, eye) in &views {
+            check_combined_coarse(&tree, v, kd, (ks, exponent), *eye)?;
         }
     }
 }
