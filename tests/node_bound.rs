@@ -319,6 +319,16 @@ fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<boo
     Ok(true)
 }
 
+/// The parent of node `index` and the node's place among its children
+/// (its lane in the parent's block); `None` for the root.
+fn parent_and_lane(tree: &LightTree, index: usize) -> Option<(usize, usize)> {
+    let parent = tree
+        .nodes()
+        .iter()
+        .position(|n| n.children().contains(&index))?;
+    Some((parent, index - tree.nodes()[parent].children().start))
+}
+
 /// The coarse bound of node `index` (through its parent's
 /// `bound_children_coarse`, alone and among all its siblings) contains the
 /// exact sum, and is at most `2^-12` of the node's `I kd / (D - R)^2` wider
@@ -331,14 +341,9 @@ fn check_coarse(
     f64_bound: &NodeEstimate,
     exact: DVec3,
 ) -> Result<(), TestCaseError> {
-    let Some(parent) = tree
-        .nodes()
-        .iter()
-        .position(|n| n.children().contains(&index))
-    else {
+    let Some((parent, lane)) = parent_and_lane(tree, index) else {
         return Ok(());
     };
-    let lane = index - tree.nodes()[parent].children().start;
     let node = &tree.nodes()[index];
     let siblings = tree.nodes()[parent].children().len();
     for wanted in [1u8 << lane, ((1u16 << siblings) - 1) as u8] {
@@ -420,17 +425,12 @@ fn check_combined_coarse(
     let Some((index, cone, surface)) = place_view(tree, view) else {
         return Ok(());
     };
-    let Some(parent) = tree
-        .nodes()
-        .iter()
-        .position(|n| n.children().contains(&index))
-    else {
+    let Some((parent, lane)) = parent_and_lane(tree, index) else {
         return Ok(());
     };
     let Ok(surface) = surface.with_view(eye.as_vec3()) else {
         return Ok(());
     };
-    let lane = index - tree.nodes()[parent].children().start;
     let (lambert, phong) = (Lambert::new(kd), Phong::new(ks, exponent));
     let combined = Combined::new(lambert, phong);
     let at = combined.prepare(&surface);
