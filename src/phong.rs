@@ -74,8 +74,10 @@ const LOBE_LOG_SPACE_BELOW: f64 = 1e-280;
 /// space when it would underflow, so no bound is lost to a `cos^e` that
 /// flushed to zero while `I/d^2` is large; for an integer exponent up to
 /// 512 it is otherwise taken by repeated multiplication, and both ends
-/// move outward by `e f64::EPSILON`, twice its rounding. Exponents
-/// `0 <= e <= 1e6`.
+/// move outward by `e f64::EPSILON`, twice its rounding. Among subnormal
+/// values, where a rounding is absolute (up to half the smallest
+/// subnormal), both ends also move outward by the smallest subnormal per
+/// member light (the lower end not below 0). Exponents `0 <= e <= 1e6`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Phong {
     ks: DVec3,
@@ -392,10 +394,16 @@ impl Shader for Phong {
         } else {
             0.0
         };
+        // Among subnormals a term, a sum and each end are within half the
+        // smallest one of their exact values, absolutely, which no relative
+        // allowance covers (a lobe of a large exponent far off its axis
+        // lives there): both ends move outward by the smallest subnormal
+        // per member.
+        let pad = DVec3::splat(f64::from(node.light_count) * f64::from_bits(1));
         NodeEstimate::new(
             self.lobe(scale, r.dot(cone.axis)),
-            self.lobe(scale * far_falloff, cos_lo) * (1.0 - widen),
-            self.lobe(scale * near_falloff, cos_hi) * (1.0 + widen),
+            (self.lobe(scale * far_falloff, cos_lo) * (1.0 - widen) - pad).max(DVec3::ZERO),
+            self.lobe(scale * near_falloff, cos_hi) * (1.0 + widen) + pad,
         )
     }
 }
