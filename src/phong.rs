@@ -157,6 +157,16 @@ impl Phong {
         (f64::from(n) == self.exponent && self.exponent <= PHONG_SINE_ROUTE_ABOVE).then_some(n)
     }
 
+    /// `scale * cos^e` for `cos > 0` by repeated multiplication instead of
+    /// `exp(e ln cos)` (at most `e - 1` roundings more, see [`power`]), for
+    /// an integer exponent up to [`PHONG_SINE_ROUTE_ABOVE`] and a power
+    /// that does not underflow; `None` otherwise (the log route).
+    #[inline]
+    fn lobe_by_power(&self, scale: DVec3, cos: f64) -> Option<DVec3> {
+        let lobe = power(cos, self.small_integer_exponent()?);
+        (lobe >= LOBE_LOG_SPACE_BELOW).then(|| scale * lobe)
+    }
+
     /// `scale * max(0, cos)^e` per channel, without losing a product that is
     /// representable to an underflowing power.
     #[inline]
@@ -167,11 +177,8 @@ impl Phong {
         if self.exponent == 0.0 {
             return scale;
         }
-        if let Some(n) = self.small_integer_exponent() {
-            let lobe = power(cos, n);
-            if lobe >= LOBE_LOG_SPACE_BELOW {
-                return scale * lobe;
-            }
+        if let Some(lobe) = self.lobe_by_power(scale, cos) {
+            return lobe;
         }
         self.lobe_from_log(scale, self.exponent * cos.ln())
     }
@@ -352,14 +359,8 @@ impl Shader for Phong {
         }
         let length_times_d = mirror.unnormalized_length * d2.sqrt();
         let cos = along / length_times_d;
-        if let Some(n) = self.small_integer_exponent() {
-            // Repeated multiplication instead of `exp(e ln cos)`: at most
-            // `e - 1` roundings, and no lobe that underflows (those take the
-            // log route below).
-            let lobe = power(cos, n);
-            if lobe >= LOBE_LOG_SPACE_BELOW {
-                return scale * lobe;
-            }
+        if let Some(lobe) = self.lobe_by_power(scale, cos) {
+            return lobe;
         }
         let log_cos = if cos > 0.5 && self.exponent > PHONG_SINE_ROUTE_ABOVE {
             // Near the axis of a narrow lobe: ln cos = ln(1 - t) with

@@ -379,15 +379,11 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
     ) -> Option<(DVec3, DVec3)> {
         let first = self.first.sum_lights_coarse(&p.0, s, lights);
         let second = self.second.sum_lights_coarse(&p.1, s, lights);
-        let plain = |sum: &dyn Fn(&[PointLight]) -> DVec3| {
-            let total = lights.chunks(SUM_LIGHTS_MAX).map(sum).sum::<DVec3>();
-            (total, DVec3::ZERO)
-        };
         let (a, b) = match (first, second) {
             (None, None) => return None,
             (Some(a), Some(b)) => (a, b),
-            (Some(a), None) => (a, plain(&|l| self.second.sum_lights(&p.1, s, l))),
-            (None, Some(b)) => (plain(&|l| self.first.sum_lights(&p.0, s, l)), b),
+            (Some(a), None) => (a, (summed(&self.second, &p.1, s, lights), DVec3::ZERO)),
+            (None, Some(b)) => ((summed(&self.first, &p.0, s, lights), DVec3::ZERO), b),
         };
         let sum = a.0 + b.0;
         Some((sum, a.1 + b.1 + sum * f64::EPSILON))
@@ -396,13 +392,10 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
     /// The sum of the two intervals, for per-point data `p` and surface `s`.
     #[inline]
     fn bound(&self, p: &Self::PerPoint, s: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
-        let a = self.first.bound(&p.0, s, node, cone);
-        let b = self.second.bound(&p.1, s, node, cone);
-        NodeEstimate {
-            estimate: a.estimate + b.estimate,
-            lower: a.lower + b.lower,
-            upper: a.upper + b.upper,
-        }
+        added(
+            &self.first.bound(&p.0, s, node, cone),
+            &self.second.bound(&p.1, s, node, cone),
+        )
     }
 
     #[inline]
@@ -421,11 +414,7 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
             let second = &mut second[..out.len()];
             self.second.bound_nodes(&p.1, s, nodes, cones, second);
             for (a, b) in out.iter_mut().zip(second.iter()) {
-                *a = NodeEstimate {
-                    estimate: a.estimate + b.estimate,
-                    lower: a.lower + b.lower,
-                    upper: a.upper + b.upper,
-                };
+                *a = added(a, b);
             }
         }
     }
@@ -486,11 +475,7 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
                 cone.map(|c| self.second.bound(&p.1, s, child, &c))
             };
             out[i] = match (a, b) {
-                (Some(a), Some(b)) => Some(NodeEstimate {
-                    estimate: a.estimate + b.estimate,
-                    lower: a.lower + b.lower,
-                    upper: a.upper + b.upper,
-                }),
+                (Some(a), Some(b)) => Some(added(&a, &b)),
                 _ => None,
             };
         }
@@ -509,6 +494,27 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         let a = self.first.horizon(surface)?;
         (self.second.horizon(surface)? == a).then_some(a)
     }
+}
+
+/// The interval of a sum of two shaders' terms: the ends and estimates
+/// added.
+#[inline]
+fn added(a: &NodeEstimate, b: &NodeEstimate) -> NodeEstimate {
+    NodeEstimate {
+        estimate: a.estimate + b.estimate,
+        lower: a.lower + b.lower,
+        upper: a.upper + b.upper,
+    }
+}
+
+/// `shader`'s [`Shader::sum_lights`] over any number of `lights`, at most
+/// [`SUM_LIGHTS_MAX`] a call.
+#[inline]
+fn summed<S: Shader>(shader: &S, p: &S::PerPoint, s: &Surface, lights: &[PointLight]) -> DVec3 {
+    lights
+        .chunks(SUM_LIGHTS_MAX)
+        .map(|l| shader.sum_lights(p, s, l))
+        .sum()
 }
 
 impl<A: ViewIndependent, B: ViewIndependent> ViewIndependent for Combined<A, B> {}
