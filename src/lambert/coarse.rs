@@ -36,6 +36,18 @@
 //! `28.4 u E'` bounds the error; [`ERROR_UNITS`] `= 32` leaves a margin.
 //! `kd` multiplies sum and bound in `f64`.
 //!
+//! Lights surely below the tangent plane add nothing to `E`: where the
+//! computed `c = h t` is below `-8u`, `h < -8u D (1 - 5.01 u) < -7.9 u D`
+//! (as `t` is within `4.002 u / D` of `1 / D`), so the exact height is
+//! below `-2.9 u D`, negative: the exact term is 0, and the computed one is
+//! `max(h r, 0) = +0` (`h < 0 < r`), which adds nothing to a lane's sum nor
+//! to its roundings, nor to the underflow. The sum over the other lights is
+//! the whole sum, so `E` need only run over them: `e` adds `max_k I_k v`
+//! only where `c >= -8u`. Where every light is surely below the plane, the
+//! sum is exactly 0 with a bound of 0 (no underflow allowance either). A point on a wall sees about half of a nearby group of lights
+//! behind it; without this, their `1 / D^2` would make the bound a large
+//! share of the sum, and the caller would sum them again in `f64`.
+//!
 //! Range: every lane must have `2^-60 <= d2 <= 2^60` and `max_k I_k <=
 //! 2^40`, or the sum returns `None` (the caller then sums in `f64`); then
 //! nothing overflows (a term is at most `2^100`, a sum of 64 at most
@@ -43,7 +55,7 @@
 //! `2^-150` (sums of subnormal values are exact): at most `2^-126 I` of
 //! `I w` against the `2^-80 I` the relative bound allows at the largest
 //! distance, except for the product `I w` itself and the envelope's `e`,
-//! so the bound adds `2^-140` per light (times `kd`).
+//! so the bound adds `2^-140` per light (times `kd`; but see below).
 
 use glam::{DVec3, Vec3};
 
@@ -66,17 +78,23 @@ const U: f64 = 1.0 / 16_777_216.0;
 /// Absolute allowance per light for underflow (module docs).
 const UNDERFLOW: f64 = 7.174_648_137_343_064e-43; // 2^-140
 
+/// `-8u`: lights whose computed `h t` lies below it are below the tangent
+/// plane, exactly 0, and left out of the envelope (module docs).
+const BELOW: f32 = -8.0 / 16_777_216.0;
+
 /// The range every lane must be in (module docs).
 const D2_MIN: f32 = 1.0 / 1_152_921_504_606_846_976.0; // 2^-60
 const D2_MAX: f32 = 1_152_921_504_606_846_976.0; // 2^60
 const INTENSITY_MAX: f32 = 1_099_511_627_776.0; // 2^40
 
 /// Per lane: the three channels' sums, the envelope's, and whether every
-/// light so far was in range.
+/// light so far was in range; whether any light was not surely below the
+/// plane.
 struct Sums {
     rgb: [[f32; LANES]; 3],
     envelope: [f32; LANES],
     in_range: bool,
+    any: bool,
 }
 
 /// The point and the unit normal in `f32`, or `None` when the point is not
@@ -104,14 +122,18 @@ impl Frame {
         let h = (n.x * d.x + n.y * d.y) + n.z * d.z;
         let d2 = (d.x * d.x + d.y * d.y) + d.z * d.z;
         let v = 1.0 / d2;
-        let hr = h * (v * v.sqrt());
+        let t = v.sqrt();
+        let hr = h * (v * t);
         let w = if hr > 0.0 { hr } else { 0.0 };
         let i = light.intensity;
         let largest = max(max(i.x, i.y), i.z);
         for (sum, i) in sums.rgb.iter_mut().zip(i.to_array()) {
             sum[lane] += i * w;
         }
-        sums.envelope[lane] += largest * v;
+        // Lights surely below the plane are left out (module docs).
+        let counted = h * t >= BELOW;
+        sums.envelope[lane] += if counted { largest * v } else { 0.0 };
+        sums.any |= counted;
         sums.in_range &= (D2_MIN..=D2_MAX).contains(&d2) && largest <= INTENSITY_MAX;
     }
 
@@ -129,15 +151,24 @@ impl Frame {
             sums.rgb.each_ref().map(add),
             add(&sums.envelope),
             kd,
+            sums.any,
             lights,
         )
     }
 
     /// `kd` times the summed channels, and the bound from the summed
-    /// envelope (module docs).
+    /// envelope and the number of lights, or none where no light was counted
+    /// (module docs).
     #[inline(always)]
-    fn finish(rgb: [f32; 3], envelope: f32, kd: DVec3, lights: usize) -> Option<(DVec3, DVec3)> {
+    fn finish(
+        rgb: [f32; 3],
+        envelope: f32,
+        kd: DVec3,
+        counted: bool,
+        lights: usize,
+    ) -> Option<(DVec3, DVec3)> {
         let [r, g, b] = rgb.map(f64::from);
+        let lights = if counted { lights } else { 0 };
         let error =
             (ERROR_UNITS * U * f64::from(envelope) + lights as f64 * UNDERFLOW) * (1.0 + 1e-12);
         // With `kd`'s products' own rounding (`2^-53` relative).
@@ -168,6 +199,7 @@ pub(crate) fn sum_baseline(
         rgb: [[0.0; LANES]; 3],
         envelope: [0.0; LANES],
         in_range: true,
+        any: false,
     };
     for (i, light) in lights.iter().enumerate() {
         frame.add(light, i % LANES, &mut sums);
@@ -203,7 +235,8 @@ pub(crate) fn sum_avx2(
     let one = _mm256_set1_ps(1.0);
     let (d2_min, d2_max) = (_mm256_set1_ps(D2_MIN), _mm256_set1_ps(D2_MAX));
     let intensity_max = _mm256_set1_ps(INTENSITY_MAX);
-    let (mut r, mut g, mut b, mut e) = (zero, zero, zero, zero);
+    let below = _mm256_set1_ps(BELOW);
+    let (mut r, mut g, mut b, mut e, mut any) = (zero, zero, zero, zero, zero);
     let all = _mm256_cmp_ps::<_CMP_LE_OQ>(zero, zero);
     let mut in_range = all;
     // Up to eight lights' terms, added to the lanes that `mask` keeps; lane
@@ -214,7 +247,8 @@ pub(crate) fn sum_avx2(
     // One division and one square root per eight lights (module docs).
     macro_rules! add {
         ($chunk:expr, $mask:expr) => {{
-            let (chunk, mask): (&[PointLight], __m256) = ($chunk, $mask);
+            // `None` for a full chunk: no lane is left out.
+            let (chunk, mask): (&[PointLight], Option<__m256>) = ($chunk, $mask);
             let last = chunk.len() - 1;
             let at = |k: usize| &chunk[k.min(last)];
             // (x, y, z, red) of lights k and k + 4 in one vector's halves,
@@ -253,14 +287,22 @@ pub(crate) fn sum_avx2(
                 _mm256_mul_ps(dz, dz),
             );
             let v = _mm256_div_ps(one, d2);
-            let cube = _mm256_mul_ps(v, _mm256_sqrt_ps(v));
+            let t = _mm256_sqrt_ps(v);
+            let cube = _mm256_mul_ps(v, t);
             let w = _mm256_max_ps(_mm256_mul_ps(h, cube), zero);
             let largest = _mm256_max_ps(_mm256_max_ps(red, green), blue);
-            let kept = |v: __m256| _mm256_and_ps(v, mask);
+            let kept = |v: __m256| match mask {
+                Some(mask) => _mm256_and_ps(v, mask),
+                None => v,
+            };
             r = _mm256_add_ps(r, kept(_mm256_mul_ps(red, w)));
             g = _mm256_add_ps(g, kept(_mm256_mul_ps(green, w)));
             b = _mm256_add_ps(b, kept(_mm256_mul_ps(blue, w)));
-            e = _mm256_add_ps(e, kept(_mm256_mul_ps(largest, v)));
+            // Lights surely below the plane are left out (module docs).
+            let counted = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_mul_ps(h, t), below);
+            let envelope = _mm256_and_ps(_mm256_mul_ps(largest, v), counted);
+            e = _mm256_add_ps(e, kept(envelope));
+            any = _mm256_or_ps(any, kept(counted));
             let ok = _mm256_and_ps(
                 _mm256_and_ps(
                     _mm256_cmp_ps::<_CMP_GE_OQ>(d2, d2_min),
@@ -269,13 +311,19 @@ pub(crate) fn sum_avx2(
                 _mm256_cmp_ps::<_CMP_LE_OQ>(largest, intensity_max),
             );
             // Lanes left out count as in range.
-            in_range = _mm256_and_ps(in_range, _mm256_or_ps(ok, _mm256_andnot_ps(mask, all)));
+            in_range = _mm256_and_ps(
+                in_range,
+                match mask {
+                    Some(mask) => _mm256_or_ps(ok, _mm256_andnot_ps(mask, all)),
+                    None => ok,
+                },
+            );
         }};
     }
     let chunks = lights.chunks_exact(LANES);
     let rest = chunks.remainder();
     for chunk in chunks {
-        add!(chunk, all);
+        add!(chunk, None);
     }
     if !rest.is_empty() {
         // The last lights in lanes 0 onwards; the other lanes repeat the
@@ -285,7 +333,7 @@ pub(crate) fn sum_avx2(
             _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
             _mm256_set1_ps(rest.len() as f32),
         );
-        add!(rest, mask);
+        add!(rest, Some(mask));
     }
     if _mm256_movemask_ps(in_range) != 0xff {
         return None;
@@ -298,7 +346,14 @@ pub(crate) fn sum_avx2(
         _mm256_extractf128_ps::<1>(pairs),
     );
     let lane = |i: usize| crate::dispatch::lane_of_ps(_mm256_castps128_ps256(sums), i);
-    Frame::finish([lane(0), lane(1), lane(2)], lane(3), kd, lights.len())
+    let counted = _mm256_movemask_ps(any) != 0;
+    Frame::finish(
+        [lane(0), lane(1), lane(2)],
+        lane(3),
+        kd,
+        counted,
+        lights.len(),
+    )
 }
 
 #[cfg(test)]
@@ -430,5 +485,36 @@ mod tests {
         moved.point.x += 1e-12;
         assert!(sum_baseline(DVec3::ONE, &moved, &[above(1.0, 1.0)]).is_none());
         assert!(coarse(&lambert, &moved, &[above(1.0, 1.0)]).is_none());
+    }
+
+    /// Lights behind the surface, near it and bright, leave the sum and its
+    /// bound the very bits they are without them (alone: 0 and 0), while
+    /// lights a hair below the plane (within the rounding of the height)
+    /// still count in the bound.
+    #[test]
+    fn lights_below_the_plane_add_nothing_to_the_bound() {
+        let lambert = Lambert::new(Vec3::new(0.9, 0.5, 0.25));
+        let p = Vec3::new(3.0, -2.0, 1.5);
+        let surface = Surface::new(p, Vec3::Z, None).unwrap();
+        let at = |x: f32, y: f32, z: f32, i: f32| {
+            PointLight::new(p + Vec3::new(x, y, z), Vec3::splat(i))
+        };
+        let lit: Vec<PointLight> = (0..13).map(|k| at(k as f32, 1.0, 5.0, 1.0)).collect();
+        let behind: Vec<PointLight> = (0..13)
+            .map(|k| at(0.1 * k as f32, 0.2, -0.25, 1e3))
+            .collect();
+        let (sum, error) = coarse(&lambert, &surface, &lit).unwrap();
+        let mixed: Vec<PointLight> = lit.iter().chain(&behind).copied().collect();
+        let (mixed_sum, mixed_error) = coarse(&lambert, &surface, &mixed).unwrap();
+        assert_eq!((mixed_sum, mixed_error), (sum, error));
+        // Alone they are exactly 0, with a bound of 0.
+        assert_eq!(
+            coarse(&lambert, &surface, &behind),
+            Some((DVec3::ZERO, DVec3::ZERO))
+        );
+        // A hair below: counted, its term rounding to 0 or not.
+        let hair = [at(1.0, 0.0, -1e-9, 1.0)];
+        let (_, hair_error) = coarse(&lambert, &surface, &hair).unwrap();
+        assert!(hair_error.x > 16.0 * U * 0.9, "{hair_error}");
     }
 }

@@ -401,20 +401,10 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// bounded.
     #[inline(always)]
     fn admit(&mut self, index: usize, visible: bool, weight: f64) -> Admitted {
+        if self.unlit(index) {
+            return Admitted::Done(None);
+        }
         let node: &Node = &self.tree.nodes[index];
-        if node.intensity == DVec3::ZERO {
-            // Dark node: exactly zero whatever its geometry, even when its
-            // ball holds the shading point; no query is needed.
-            return Admitted::Done(None);
-        }
-        if let Some(plane) = self.tree.node_plane(index)
-            && self.below_horizon(plane)
-        {
-            // Every light lies at or below the tangent plane, where the
-            // shader's model is exactly 0: settled without a bound.
-            self.nodes += 1;
-            return Admitted::Done(None);
-        }
         if node.radius == 0.0 {
             // A single light, or coincident lights (the build makes them one
             // leaf): exactly one light of the summed intensity at the
@@ -425,6 +415,25 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         }
         self.nodes += 1;
         Admitted::ToBound
+    }
+
+    /// Whether node `index` is exactly 0 at this point whatever its
+    /// geometry, so that it needs neither a bound nor a sum: a dark node
+    /// (even when its ball holds the shading point; no query is needed), or
+    /// one whose lights all lie at or below the tangent plane, where the
+    /// shader's model is exactly 0 (counted as a node evaluation).
+    #[inline(always)]
+    fn unlit(&mut self, index: usize) -> bool {
+        if self.tree.nodes[index].intensity == DVec3::ZERO {
+            return true;
+        }
+        if let Some(plane) = self.tree.node_plane(index)
+            && self.below_horizon(plane)
+        {
+            self.nodes += 1;
+            return true;
+        }
+        false
     }
 
     /// The entry of node `index` when it has no finite bound (its ball
@@ -539,10 +548,24 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     }
 
     /// Whether a visible node is summed light by light when it enters the
-    /// cut instead of bounded (see [`EXACT_NODE_LIGHTS`]).
+    /// cut instead of bounded: a small one (see [`EXACT_NODE_LIGHTS`]), or
+    /// one near the shading point for its size and number of lights (see
+    /// [`NEAR_NODE_LIGHTS`]).
     #[inline(always)]
     fn sums_exactly(&self, node: &Node) -> bool {
-        node.radius != 0.0 && node.light_count <= self.exact_lights
+        if node.radius == 0.0 || self.exact_lights == 0 {
+            return false;
+        }
+        if node.light_count <= self.exact_lights {
+            return true;
+        }
+        // `n D^2 <= NEAR_NODE_REACH R^2` in f64, where neither side can
+        // overflow for finite f32 inputs.
+        let n = f64::from(node.light_count);
+        let r = f64::from(node.radius);
+        node.light_count <= NEAR_NODE_LIGHTS
+            && n * (node.centroid.as_dvec3() - self.surface.point).length_squared()
+                <= NEAR_NODE_REACH * r * r
     }
 
     /// Each light of `range` (leaf order) exactly, see
@@ -725,8 +748,12 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         for (i, child) in node.children().enumerate() {
             let c = &tree.nodes[child];
             if known && self.sums_exactly(c) {
-                // Summing a few visible lights costs less than bounding
-                // them (the budget counted them in `can_refine`).
+                // Summing a few visible lights, or those of a near node,
+                // costs less than bounding them (the budget counted them in
+                // `can_refine`); a node that is exactly 0 needs neither.
+                if self.unlit(child) {
+                    continue;
+                }
                 let lights = c.lights();
                 if self.one_by_one {
                     // In the children's order, as `exact_query` adds.
@@ -957,6 +984,29 @@ impl<F: FnMut(Entry)> Pending for F {
 /// same within noise at 10^4 (8.5-8.7 us; medians of 9 alternating scratch
 /// runs; 48 and 64 did as well as 32, 128 worse).
 pub(crate) const EXACT_NODE_LIGHTS: u32 = 32;
+
+/// Nodes of at most this many lights, known visible, are also summed light
+/// by light when they are near the shading point for their size: `n D^2 <=`
+/// [`NEAR_NODE_REACH`]` R^2`, `n` the node's lights, `D` the distance from
+/// the point to its centroid and `R` its radius (without interpolation
+/// across levels, as [`EXACT_NODE_LIGHTS`]). A certified cut takes a near
+/// node down to its lights anyway, and a larger one only nearer: summing
+/// it at once skips the bounds and the steps on the way down. The reach
+/// shrinks as the lights grow in number (a node of 64 lights within `2.8
+/// R`, of 512 within `R`), so that a sum costs at most a few node bounds'
+/// worth of each level.
+///
+/// Measured on the street city at a certified 1%, one point at a time
+/// (callgrind instructions of the cut, and alternating timed passes):
+/// 0.77x the instructions at 10^3 and 10^4 lights, 0.88x at 10^5 and 0.89x
+/// at 10^6; among 64, 128, 256 and 512 lights and reaches of 4 to 2,048
+/// (and a plain distance test, `D <= 4 R` up to 64 lights), 512 and 512
+/// gave the fewest instructions at 10^3 to 10^5. A glossy scene's cut
+/// (string lights, Phong exponent 100) was unchanged.
+pub(crate) const NEAR_NODE_LIGHTS: u32 = 512;
+
+/// See [`NEAR_NODE_LIGHTS`].
+const NEAR_NODE_REACH: f64 = 512.0;
 
 /// Partial answers for small nodes before the cut may judge classification
 /// useless (see [`Cut::gave_up_classifying`]).
