@@ -29,6 +29,10 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     /// Largest visible node summed light by light instead of bounded: 0
     /// with interpolation, whose blend ramps through bounded nodes.
     exact_lights: u32,
+    /// Largest visible node summed light by light when near the point (see
+    /// [`NEAR_NODE_LIGHTS`]): 0 with interpolation, or with a budget, which
+    /// such a sum could spend at once.
+    near_lights: u32,
     /// Whether visible lights are added one at a time to the compensated
     /// sum (a target of 0, see [`Threshold::exact`]) rather than a few at a
     /// time ([`Shader::sum_lights`]).
@@ -100,6 +104,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 0
             } else {
                 EXACT_NODE_LIGHTS
+            },
+            near_lights: if threshold.interpolation().is_some() || threshold.budget().is_some() {
+                0
+            } else {
+                NEAR_NODE_LIGHTS
             },
             one_by_one: threshold.is_exact(),
             small_scene,
@@ -553,7 +562,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     /// [`NEAR_NODE_LIGHTS`]).
     #[inline(always)]
     fn sums_exactly(&self, node: &Node) -> bool {
-        if node.radius == 0.0 || self.exact_lights == 0 {
+        if node.radius == 0.0 {
             return false;
         }
         if node.light_count <= self.exact_lights {
@@ -563,7 +572,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         // overflow for finite f32 inputs.
         let n = f64::from(node.light_count);
         let r = f64::from(node.radius);
-        node.light_count <= NEAR_NODE_LIGHTS
+        node.light_count <= self.near_lights
             && n * (node.centroid.as_dvec3() - self.surface.point).length_squared()
                 <= NEAR_NODE_REACH * r * r
     }
@@ -989,12 +998,12 @@ pub(crate) const EXACT_NODE_LIGHTS: u32 = 32;
 /// by light when they are near the shading point for their size: `n D^2 <=`
 /// [`NEAR_NODE_REACH`]` R^2`, `n` the node's lights, `D` the distance from
 /// the point to its centroid and `R` its radius (without interpolation
-/// across levels, as [`EXACT_NODE_LIGHTS`]). A certified cut takes a near
-/// node down to its lights anyway, and a larger one only nearer: summing
-/// it at once skips the bounds and the steps on the way down. The reach
-/// shrinks as the lights grow in number (a node of 64 lights within `2.8
-/// R`, of 512 within `R`), so that a sum costs at most a few node bounds'
-/// worth of each level.
+/// across levels, as [`EXACT_NODE_LIGHTS`], nor under a budget, which one
+/// such sum could spend at once). A certified cut takes a near node down
+/// to its lights anyway: summing it at once skips the bounds and the steps
+/// on the way down. The reach shrinks as the lights grow in number (a node
+/// of 64 lights within `2.8 R`, of 512 within `R`), as the larger the
+/// node, the nearer it must be for the cut to need all of its lights.
 ///
 /// Measured on the street city at a certified 1%, one point at a time
 /// (callgrind instructions of the cut, and alternating timed passes):
