@@ -331,8 +331,15 @@ fn parent_and_lane(tree: &LightTree, index: usize) -> Option<(usize, usize)> {
 
 /// The coarse bound of node `index` (through its parent's
 /// `bound_children_coarse`, alone and among all its siblings) contains the
-/// exact sum, and is at most `2^-12` of the node's `I kd / (D - R)^2` wider
+/// exact sum, and is at most `2^-11` of the node's `I kd / (D - R)^2` wider
 /// than the `f64` bound at either end.
+///
+/// The widening grows with `D / (D - R)`, at most 64 in `f32` lanes (`R / D
+/// < 1 - 2^-6`). There the box's height slack, `12 u (D + B)` with `B <= 3
+/// R`, times `(D / (D - R))^3 / D^3`, comes to about `2^-12.4` of the
+/// scale; `sigma`'s upward nudge moves `(D / (D - R))^2` by about
+/// `2^-14`, and the point's rounding adds `2^-16.4`: about `2^-11.95` in
+/// all. A run of 20,000 cases found `2^-11.997` (`D / R - 1 = 0.016`).
 fn check_coarse(
     tree: &LightTree,
     index: usize,
@@ -373,16 +380,18 @@ fn check_coarse(
             prop_assert!(
                 bound.lower[k] <= bound.estimate[k] && bound.estimate[k] <= bound.upper[k]
             );
-            let slack = scale[k] / 4096.0;
+            let slack = scale[k] / 2048.0;
             prop_assert!(
                 bound.upper[k] <= f64_bound.upper[k] + slack
                     && bound.lower[k] >= f64_bound.lower[k] - slack,
-                "coarse channel {k}: [{:e}, {:e}] much wider than [{:e}, {:e}] (scale {:e})",
+                "coarse channel {k}: [{:e}, {:e}] much wider than [{:e}, {:e}] (scale {:e}, \
+                 D/R - 1 = {:e})",
                 bound.lower[k],
                 bound.upper[k],
                 f64_bound.lower[k],
                 f64_bound.upper[k],
-                scale[k]
+                scale[k],
+                d / f64::from(node.radius()) - 1.0,
             );
         }
     }
