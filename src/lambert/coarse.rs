@@ -44,9 +44,10 @@
 //! to its roundings, nor to the underflow. The sum over the other lights is
 //! the whole sum, so `E` need only run over them: `e` adds `max_k I_k v`
 //! only where `c >= -8u`. Where every light is surely below the plane, the
-//! sum is exactly 0 with a bound of 0 (no underflow allowance either). A point on a wall sees about half of a nearby group of lights
-//! behind it; without this, their `1 / D^2` would make the bound a large
-//! share of the sum, and the caller would sum them again in `f64`.
+//! sum is exactly 0 with a bound of 0 (no underflow allowance either). A
+//! point on a wall sees about half of a nearby group of lights behind it;
+//! without this, their `1 / D^2` would make the bound a large share of the
+//! sum, and the caller would sum them again in `f64`.
 //!
 //! Range: every lane must have `2^-60 <= d2 <= 2^60` and `max_k I_k <=
 //! 2^40`, or the sum returns `None` (the caller then sums in `f64`); then

@@ -570,11 +570,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         }
         // `n D^2 <= NEAR_NODE_REACH R^2` in f64, where neither side can
         // overflow for finite f32 inputs.
-        let n = f64::from(node.light_count);
-        let r = f64::from(node.radius);
-        node.light_count <= self.near_lights
-            && n * (node.centroid.as_dvec3() - self.surface.point).length_squared()
-                <= NEAR_NODE_REACH * r * r
+        node.light_count <= self.near_lights && {
+            let d2 = (node.centroid.as_dvec3() - self.surface.point).length_squared();
+            let r = f64::from(node.radius);
+            f64::from(node.light_count) * d2 <= NEAR_NODE_REACH * r * r
+        }
     }
 
     /// Each light of `range` (leaf order) exactly, see
@@ -1012,7 +1012,7 @@ pub(crate) const EXACT_NODE_LIGHTS: u32 = 32;
 /// (and a plain distance test, `D <= 4 R` up to 64 lights), 512 and 512
 /// gave the fewest instructions at 10^3 to 10^5. A glossy scene's cut
 /// (string lights, Phong exponent 100) was unchanged.
-pub(crate) const NEAR_NODE_LIGHTS: u32 = 512;
+const NEAR_NODE_LIGHTS: u32 = 512;
 
 /// See [`NEAR_NODE_LIGHTS`].
 const NEAR_NODE_REACH: f64 = 512.0;
