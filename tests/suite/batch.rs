@@ -2,9 +2,7 @@
 //! coherent patches and scattered points, both shaders, with and without
 //! occluders; points share cuts where they can.
 
-mod common;
-
-use common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
+use crate::common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::Vec3;
 use manylights::{
     Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query,

@@ -11,9 +11,7 @@
 //! exactly zero, threshold 0 must give the shadowed sum, and a host's visible
 //! fraction may move the estimate but never break the bound.
 
-mod common;
-
-use common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
+use crate::common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::{DVec3, Vec3};
 use manylights::{
     Aabb, Coverage, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeResult, Stop,

@@ -1,9 +1,7 @@
 //! Property tests of the certified-bound contract against `shade_exact`, for
 //! Lambert (both bounds), Phong across exponents, and their sum.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use glam::Vec3;
 use manylights::{
     BoundKind, Combined, Lambert, LightTree, Phong, Query, ShadeResult, Shader, Shading, Stop,

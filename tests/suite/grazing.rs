@@ -22,11 +22,9 @@
 //! it is ignored: the second-order Lambert bound at grazing incidence, and
 //! the cost of lights in a *tilted* tangent plane.
 
-mod common;
-
 use std::ops::{Add, Div, Mul, Neg};
 
-use common::{cases, check_finite, direction, intensity, threshold, vec_in};
+use crate::common::{cases, check_finite, direction, intensity, threshold, vec_in};
 use glam::{DVec3, Vec3};
 use manylights::{
     BoundKind, Combined, Lambert, LightTree, Phong, PointLight, Query, ShadeResult, Shader,
@@ -690,7 +688,7 @@ proptest! {
 /// Counts failing scenes (instead of stopping at the first) over
 /// `PROPTEST_CASES` scenes of each kind (default 10,000), and prints the
 /// counts; `CENSUS_VERBOSE=1` prints each failure:
-/// `cargo test --test grazing failure_census -- --ignored --nocapture`.
+/// `cargo test --test suite grazing::failure_census -- --ignored --nocapture`.
 #[test]
 #[ignore = "a census over many cases, run by hand"]
 fn failure_census() {

@@ -12,9 +12,7 @@
 //! line to the node's farthest member, with facing, grazing (down to
 //! exactly perpendicular), straddling, averted and random normals.
 
-mod common;
-
-use common::cases;
+use crate::common::cases;
 use glam::{DVec3, Vec3};
 use manylights::{
     BoundKind, Combined, Cone, Lambert, LightTree, NodeEstimate, Phong, PointLight, ShadeResult,

@@ -1,28 +1,46 @@
 //! Shading allocates nothing once a session is warmed: a counting global
 //! allocator watches the calls.
+//!
+//! The allocator counts per thread, so that the tests running beside this
+//! one on other threads of the harness do not enter its count.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::cell::Cell;
 
 use glam::Vec3;
 use manylights::{Combined, Lambert, LightTree, Phong, PointLight, Query, Threshold, Unoccluded};
 
 struct Counting;
 
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    // A constant initialiser and no destructor: reading it never allocates
+    // and never fails, as the allocator needs.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+/// Counts one allocation on the calling thread.
+fn count() {
+    // `try_with` rather than `with`: never a panic inside the allocator.
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+/// Allocations made so far on the calling thread.
+fn allocations() -> usize {
+    ALLOCATIONS.with(Cell::get)
+}
 
 // SAFETY: forwards every call unchanged to the system allocator; only
 // counts.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        count();
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
@@ -69,7 +87,7 @@ fn shading_does_not_allocate_once_warmed() {
                 .unwrap();
         }
     }
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let before = allocations();
     let mut cost = 0u64;
     for &p in &points {
         for &t in &thresholds {
@@ -86,8 +104,12 @@ fn shading_does_not_allocate_once_warmed() {
             );
         }
     }
-    let after = ALLOCATIONS.load(Ordering::Relaxed);
+    let after = allocations();
     assert!(cost > 0);
+    // The counter sees this thread's allocations.
+    let probe = std::hint::black_box(vec![0u8; 16]);
+    assert!(allocations() > after, "the counting allocator saw nothing");
+    drop(probe);
     assert_eq!(
         after - before,
         0,
