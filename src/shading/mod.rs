@@ -109,11 +109,10 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// lights near the point for their size (`n D^2 <= 512 R^2` for `n`
     /// lights within `R` of a centroid at distance `D`), are summed light by
     /// light when they enter the cut, and a tree of at most 256 lights (none
-    /// of them coincident)
-    /// whose lights are known visible is summed whole when its root alone
-    /// does not meet the threshold (not with interpolation across levels,
-    /// whose blend needs bounded nodes, nor beyond the budget). Summed
-    /// lights carry no error.
+    /// of them coincident) whose lights are known visible is summed whole
+    /// when its root alone does not meet the threshold (not with
+    /// interpolation across levels, whose blend needs bounded nodes, nor
+    /// beyond the budget). Summed lights carry no error.
     ///
     /// `visibility` is the host's ray tracer ([`Visibility`]); pass
     /// [`Unoccluded`] for none, or `&mut host` to keep the host.
