@@ -751,7 +751,7 @@ mod tests {
             let centre =
                 DVec3::new(u() - 0.5, u() - 0.5, u() - 0.5) * [0.0, 1e2, 1e4, 3e5][scene % 4];
             let extent = 10f64.powf(4.0 * u() - 2.0);
-            let lights: Vec<PointLight> = (0..600)
+            let lights: Vec<PointLight> = (0..1200)
                 .map(|_| {
                     let a = DVec3::new(u() - 0.5, u() - 0.5, u() - 0.5);
                     let offset = match shape {
@@ -826,7 +826,7 @@ mod tests {
         for scene in 0..12 {
             let extent = [1.0, 1e3, 1e-2][scene % 3];
             let white = scene % 2 == 0;
-            let lights: Vec<PointLight> = (0..2000)
+            let lights: Vec<PointLight> = (0..5000)
                 .map(|_| {
                     let p = Vec3::new(u() - 0.5, u() - 0.5, (u() - 0.5) * 0.3) * extent;
                     // Sodium, tinted by up to 2^-12 from one side to the

@@ -1339,7 +1339,7 @@ mod tests {
     fn nodes_bounded_together_give_the_bits_of_each_alone() {
         let mut state = 3u64;
         let mut u = || crate::testing::uniform(&mut state);
-        let lights: Vec<PointLight> = (0..4000)
+        let lights: Vec<PointLight> = (0..12000)
             .map(|_| {
                 let p = Vec3::new(u() * 40.0 - 20.0, u() * 40.0 - 20.0, u() * 6.0);
                 PointLight::new(p, Vec3::new(u(), u() * 3.0, u() * 0.1))

@@ -180,7 +180,8 @@ impl Node {
 }
 
 /// Most children of a node: the tree is an octree (a node splits into the
-/// occupied sub-cells of its cell, or in two at a median).
+/// occupied sub-cells of its cell, some of them merged into one leaf, or
+/// in two at a median).
 pub(crate) const MAX_CHILDREN: usize = 8;
 
 /// A hierarchy of point lights whose nodes are virtual lights (Paquette,

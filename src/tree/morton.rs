@@ -481,17 +481,13 @@ fn insertion_sort(keys: &mut [u64], order: &mut [u32]) {
     }
 }
 
-/// The octree level at which two codes first differ, for [`children`]:
-/// 0 for equal codes, else one more than the index of the highest 3-bit
-/// digit in which they differ (1 to 21).
+/// One more than the index of the highest bit in which two codes differ
+/// (1 to 63), 0 for equal codes: the octree level of the difference is
+/// that bit's 3-bit digit, and its place in the digit tells which halving
+/// of the cell separates them (see [`children`]).
 #[inline(always)]
 fn split_level(a: u64, b: u64) -> u8 {
-    let differ = a ^ b;
-    if differ == 0 {
-        0
-    } else {
-        ((63 - differ.leading_zeros()) / 3 + 1) as u8
-    }
+    (u64::BITS - (a ^ b).leading_zeros()) as u8
 }
 
 /// [`split_level`] of each pair of neighbours of the sorted `codes`: entry
@@ -502,40 +498,90 @@ pub(crate) fn split_levels(codes: &[u64]) -> Vec<u8> {
 }
 
 /// Splits a run of sorted codes at the first octree level where they
-/// differ: the sub-runs of equal 3-bit digit at that level (2 to 8 of them,
-/// in order), or `None` when every code is equal. Reads only the run's
-/// [`split_levels`] (one fewer than its codes): the run's level is their
-/// highest, and the run is cut after each neighbour pair at that level.
-pub(super) fn children(levels: &[u8]) -> Option<smallvec::SmallVec<[core::ops::Range<usize>; 8]>> {
-    let level = levels.iter().copied().max()?;
-    if level == 0 {
+/// differ, or `None` when every code is equal. Reads only the run's
+/// [`split_levels`] (one fewer than its codes).
+///
+/// The run's occupied sub-cells at that level (2 to 8 of them) are the
+/// leaves of three halvings of its cell, one per bit of the level's digit:
+/// the sub-runs are found by halving along those bits in turn, and a part
+/// of at most `max_lights` codes is kept whole rather than halved further.
+/// So occupied sub-cells that together hold at most `max_lights` lights
+/// come out as one part, a half or a quarter of the cell (or two of its
+/// neighbouring sub-cells), instead of as several small ones; a part of
+/// more than `max_lights` codes is always one sub-cell. The parts are in
+/// order and cover the run.
+pub(super) fn children(
+    levels: &[u8],
+    max_lights: usize,
+) -> Option<smallvec::SmallVec<[core::ops::Range<usize>; 8]>> {
+    let top = levels.iter().copied().max()?;
+    if top == 0 {
         return None;
     }
-    let mut out = smallvec::SmallVec::new();
-    let mut start = 0;
-    // Cuts after each pair of `step` at `level`, `base` the step's start.
-    let mut cut_in = |base: usize, step: &[u8]| {
+    // The digit's bits are `base` to `base + 2`: a neighbour pair whose
+    // level is above `base` is cut at bit `level - 1 - base` of the digit.
+    let base = (top - 1) / 3 * 3;
+    // Per bit of the digit, its cuts (after which code): at most one, four
+    // and two, for the highest, lowest and middle bits.
+    let mut cuts = [[0usize; 4]; 3];
+    let mut counts = [0usize; 3];
+    let mut cut_in = |at: usize, step: &[u8]| {
         for (i, &l) in step.iter().enumerate() {
-            if l == level {
-                out.push(start..base + i + 1);
-                start = base + i + 1;
+            if l > base {
+                let bit = usize::from(l - 1 - base);
+                cuts[bit][counts[bit]] = at + i + 1;
+                counts[bit] += 1;
             }
         }
     };
-    // A step of levels without one equal to `level` (most of them: at most
+    // A step of levels without one above `base` (most of them: at most
     // seven cuts in the run) is passed over after one test of them all,
     // which vector instructions take.
     const STEP: usize = 32;
     let steps = levels.chunks_exact(STEP);
     let rest = steps.remainder();
     for (k, step) in steps.enumerate() {
-        if step.iter().fold(0u8, |any, &l| any | u8::from(l == level)) != 0 {
+        if step.iter().fold(0u8, |any, &l| any | u8::from(l > base)) != 0 {
             cut_in(STEP * k, step);
         }
     }
     cut_in(levels.len() - rest.len(), rest);
-    out.push(start..levels.len() + 1);
+    let mut out = smallvec::SmallVec::new();
+    halve(&mut out, &cuts, &counts, 0..levels.len() + 1, 2, max_lights);
     Some(out)
+}
+
+/// Appends the parts of `run` (see [`children`]): whole if it holds at
+/// most `max_lights` codes or no bit of the digit is left, else cut at its
+/// cut of `bit` (if any) and each side halved along the next bit down.
+fn halve(
+    out: &mut smallvec::SmallVec<[core::ops::Range<usize>; 8]>,
+    cuts: &[[usize; 4]; 3],
+    counts: &[usize; 3],
+    run: core::ops::Range<usize>,
+    bit: usize,
+    max_lights: usize,
+) {
+    if run.len() <= max_lights {
+        out.push(run);
+        return;
+    }
+    let cut = cuts[bit][..counts[bit]]
+        .iter()
+        .copied()
+        .find(|&c| run.start < c && c < run.end);
+    match (bit, cut) {
+        (0, None) => out.push(run),
+        (0, Some(c)) => {
+            out.push(run.start..c);
+            out.push(c..run.end);
+        }
+        (_, None) => halve(out, cuts, counts, run, bit - 1, max_lights),
+        (_, Some(c)) => {
+            halve(out, cuts, counts, run.start..c, bit - 1, max_lights);
+            halve(out, cuts, counts, c..run.end, bit - 1, max_lights);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -705,32 +751,56 @@ mod tests {
             0b000_011_000,
             0b000_111_000,
         ];
-        let runs = children(&split_levels(&codes)).unwrap();
+        let levels = split_levels(&codes);
+        let runs = children(&levels, 1).unwrap();
         assert_eq!(runs.as_slice(), &[0..2, 2..3, 3..4]);
-        assert!(children(&split_levels(&[7, 7, 7])).is_none());
+        // The first three lie in one half of the cell (bit 5 clear).
+        let runs = children(&levels, 3).unwrap();
+        assert_eq!(runs.as_slice(), &[0..3, 3..4]);
+        assert!(children(&split_levels(&[7, 7, 7]), 1).is_none());
     }
 
-    /// The sub-runs of equal digit at the highest digit where the first
-    /// and last of the sorted `codes` differ, found code by code.
-    fn children_reference(codes: &[u64]) -> Option<Vec<core::ops::Range<usize>>> {
+    /// The parts of the sorted `codes` found code by code: at the highest
+    /// digit where the first and last differ, each part of more than
+    /// `max_lights` codes halved where that digit's bits change, highest
+    /// bit first.
+    fn children_reference(
+        codes: &[u64],
+        max_lights: usize,
+    ) -> Option<Vec<core::ops::Range<usize>>> {
+        fn parts(
+            codes: &[u64],
+            run: core::ops::Range<usize>,
+            bit: i32,
+            base: i32,
+            max_lights: usize,
+            out: &mut Vec<core::ops::Range<usize>>,
+        ) {
+            if run.len() <= max_lights || bit < base {
+                out.push(run);
+                return;
+            }
+            let set = |i: usize| (codes[i] >> bit) & 1 == 1;
+            let cut = (run.start..run.end).find(|&i| set(i)).unwrap_or(run.end);
+            for half in [run.start..cut, cut..run.end] {
+                if !half.is_empty() {
+                    parts(codes, half, bit - 1, base, max_lights, out);
+                }
+            }
+        }
         let differ = codes.first()? ^ codes.last()?;
         if differ == 0 {
             return None;
         }
-        let shift = (63 - differ.leading_zeros()) / 3 * 3;
+        let base = (63 - differ.leading_zeros() as i32) / 3 * 3;
         let mut out = Vec::new();
-        let mut start = 0;
-        for i in 1..=codes.len() {
-            if i == codes.len() || (codes[i] >> shift) & 7 != (codes[start] >> shift) & 7 {
-                out.push(start..i);
-                start = i;
-            }
-        }
+        parts(codes, 0..codes.len(), base + 2, base, max_lights, &mut out);
         Some(out)
     }
 
-    /// The split levels give the sub-runs found code by code, on runs of
-    /// every length around the steps the scan takes, with cuts anywhere.
+    /// The split levels give the parts found code by code, on runs of
+    /// every length around the steps the scan takes, with cuts anywhere,
+    /// for leaves of every size up to the run's.
     #[test]
     fn children_match_a_reference() {
         let mut state = 11;
@@ -747,11 +817,12 @@ mod tests {
                 codes.sort_unstable();
                 let levels = split_levels(&codes);
                 assert_eq!(levels.len() + 1, codes.len());
-                let runs = children(&levels).map(|runs| runs.to_vec());
+                let max_lights = [1, 2, 5, 32, len - 1][trial % 5];
+                let runs = children(&levels, max_lights).map(|runs| runs.to_vec());
                 assert_eq!(
                     runs,
-                    children_reference(&codes),
-                    "{len} codes, trial {trial}"
+                    children_reference(&codes, max_lights),
+                    "{len} codes, trial {trial}, leaves of {max_lights}"
                 );
             }
         }
