@@ -547,40 +547,37 @@ pub(super) fn children(
     }
     cut_in(levels.len() - rest.len(), rest);
     let mut out = smallvec::SmallVec::new();
-    halve(&mut out, &cuts, &counts, 0..levels.len() + 1, 2, max_lights);
+    halve(&mut out, &cuts, &counts, 0..levels.len() + 1, 3, max_lights);
     Some(out)
 }
 
 /// Appends the parts of `run` (see [`children`]): whole if it holds at
-/// most `max_lights` codes or no bit of the digit is left, else cut at its
-/// cut of `bit` (if any) and each side halved along the next bit down.
+/// most `max_lights` codes or no bit of the digit is left (`bits` is the
+/// number left, the highest of them next), else cut at its cut of that bit
+/// (if any) and each side halved along the bits below.
 fn halve(
     out: &mut smallvec::SmallVec<[core::ops::Range<usize>; 8]>,
     cuts: &[[usize; 4]; 3],
     counts: &[usize; 3],
     run: core::ops::Range<usize>,
-    bit: usize,
+    bits: usize,
     max_lights: usize,
 ) {
-    if run.len() <= max_lights {
+    if bits == 0 || run.len() <= max_lights {
         out.push(run);
         return;
     }
+    let bit = bits - 1;
     let cut = cuts[bit][..counts[bit]]
         .iter()
         .copied()
         .find(|&c| run.start < c && c < run.end);
-    match (bit, cut) {
-        (0, None) => out.push(run),
-        (0, Some(c)) => {
-            out.push(run.start..c);
-            out.push(c..run.end);
+    match cut {
+        Some(c) => {
+            halve(out, cuts, counts, run.start..c, bit, max_lights);
+            halve(out, cuts, counts, c..run.end, bit, max_lights);
         }
-        (_, None) => halve(out, cuts, counts, run, bit - 1, max_lights),
-        (_, Some(c)) => {
-            halve(out, cuts, counts, run.start..c, bit - 1, max_lights);
-            halve(out, cuts, counts, c..run.end, bit - 1, max_lights);
-        }
+        None => halve(out, cuts, counts, run, bit, max_lights),
     }
 }
 
