@@ -186,7 +186,7 @@ mod visibility;
 pub use error::{BuildError, ShadeError, ValidationError};
 pub use geometry::{Aabb, Cone, Surface};
 pub use lambert::{BoundKind, Lambert};
-pub use light::PointLight;
+pub use light::{LightLanes, PointLight};
 pub use phong::{Mirror, Phong};
 pub use shader::{Combined, NodeEstimate, Shader, ViewIndependent};
 pub use shading::{

@@ -47,3 +47,50 @@ impl PointLight {
         self.intensity.max_element()
     }
 }
+
+/// Eight lights side by side, one array of eight per quantity: what a
+/// shader's [`sum_lanes_coarse`](crate::Shader::sum_lanes_coarse) reads in
+/// place of eight [`PointLight`]s, so that a vector register loads each
+/// quantity of all eight at once.
+///
+/// Lane `k` of a group holds one light; in the last group of a run of
+/// lights, the lanes past the last light repeat it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(32))]
+pub struct LightLanes {
+    /// Position, x.
+    pub x: [f32; 8],
+    /// Position, y.
+    pub y: [f32; 8],
+    /// Position, z.
+    pub z: [f32; 8],
+    /// Intensity, red.
+    pub red: [f32; 8],
+    /// Intensity, green.
+    pub green: [f32; 8],
+    /// Intensity, blue.
+    pub blue: [f32; 8],
+}
+
+impl LightLanes {
+    /// `lights` side by side, eight a group (the last group's spare lanes
+    /// repeating the last light); empty for no lights.
+    #[must_use]
+    pub fn of(lights: &[PointLight]) -> Vec<Self> {
+        lights
+            .chunks(8)
+            .map(|chunk| {
+                let at = |k: usize| chunk[k.min(chunk.len() - 1)];
+                let lane = |f: fn(&PointLight) -> f32| core::array::from_fn(|k| f(&at(k)));
+                Self {
+                    x: lane(|l| l.position.x),
+                    y: lane(|l| l.position.y),
+                    z: lane(|l| l.position.z),
+                    red: lane(|l| l.intensity.x),
+                    green: lane(|l| l.intensity.y),
+                    blue: lane(|l| l.intensity.z),
+                }
+            })
+            .collect()
+    }
+}

@@ -5,7 +5,7 @@ use glam::{DVec3, Vec3};
 
 use crate::geometry::{Cone, Surface};
 use crate::tree::{LightTree, Node};
-use crate::{PointLight, ShadeError};
+use crate::{LightLanes, PointLight, ShadeError};
 
 /// The most lights the cut passes to one [`Shader::sum_lights`] call.
 pub(crate) const SUM_LIGHTS_MAX: usize = 16;
@@ -203,6 +203,31 @@ pub trait Shader {
         lights: &[PointLight],
     ) -> Option<(DVec3, DVec3)> {
         let _ = (point, surface, lights);
+        None
+    }
+
+    /// [`sum_lights_coarse`](Self::sum_lights_coarse) of the `count`
+    /// lights that `lanes` hold side by side (light `8 j + k` in lane `k`
+    /// of `lanes[j]`; at most 64 lights, `count` of them, the spare lanes
+    /// of the last group repeating the last light): `Some` of a sum and a
+    /// certified bound on its error as there, or `None`. The cut calls it
+    /// where it sums a whole small scene, whose lights it keeps side by
+    /// side for this, and calls `sum_lights_coarse` on the same lights
+    /// where it returns `None`; the default returns `None`. [`Lambert`]
+    /// gives the same bits as its `sum_lights_coarse`, loading each
+    /// quantity of eight lights with one instruction instead of gathering
+    /// them.
+    ///
+    /// [`Lambert`]: crate::Lambert
+    #[inline]
+    fn sum_lanes_coarse(
+        &self,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        lanes: &[LightLanes],
+        count: usize,
+    ) -> Option<(DVec3, DVec3)> {
+        let _ = (point, surface, lanes, count);
         None
     }
 

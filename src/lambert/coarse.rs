@@ -60,8 +60,8 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::PointLight;
 use crate::geometry::Surface;
+use crate::{LightLanes, PointLight};
 
 /// The most lights one call sums (eight a lane at most, see the module
 /// docs).
@@ -357,6 +357,139 @@ pub(crate) fn sum_avx2(
     )
 }
 
+/// [`sum_baseline`] of the `count` lights that `lanes` hold side by side
+/// (light `i` in lane `i % 8` of `lanes[i / 8]`): the same lights in the
+/// same lanes, so the same bits.
+pub(crate) fn sum_lanes_baseline(
+    kd: DVec3,
+    surface: &Surface,
+    lanes: &[LightLanes],
+    count: usize,
+) -> Option<(DVec3, DVec3)> {
+    if count > COARSE_MAX || count > lanes.len() * LANES {
+        return None;
+    }
+    let frame = Frame::new(surface)?;
+    let mut sums = Sums {
+        rgb: [[0.0; LANES]; 3],
+        envelope: [0.0; LANES],
+        in_range: true,
+        any: false,
+    };
+    for i in 0..count {
+        let (group, k) = (&lanes[i / LANES], i % LANES);
+        let light = PointLight::new(
+            Vec3::new(group.x[k], group.y[k], group.z[k]),
+            Vec3::new(group.red[k], group.green[k], group.blue[k]),
+        );
+        frame.add(&light, k, &mut sums);
+    }
+    Frame::total(&sums, kd, count)
+}
+
+/// [`sum_lanes_baseline`] with AVX2 instructions: each quantity of eight
+/// lights one load, then the operations of [`sum_avx2`] lane by lane, so
+/// the same bits. The range is checked on the smallest and largest
+/// squared distance and the largest channel over the lanes (a spare lane
+/// repeats a light, so it moves none of them), which decides as the
+/// lane-by-lane comparisons do: no squared distance is NaN (the
+/// coordinates are finite), and no channel is.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) fn sum_lanes_avx2(
+    kd: DVec3,
+    surface: &Surface,
+    lanes: &[LightLanes],
+    count: usize,
+) -> Option<(DVec3, DVec3)> {
+    use core::arch::x86_64::{
+        _CMP_GE_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _mm_add_ps, _mm256_add_ps, _mm256_and_ps,
+        _mm256_castps128_ps256, _mm256_castps256_ps128, _mm256_cmp_ps, _mm256_div_ps,
+        _mm256_extractf128_ps, _mm256_hadd_ps, _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps,
+        _mm256_mul_ps, _mm256_or_ps, _mm256_set1_ps, _mm256_setr_ps, _mm256_setzero_ps,
+        _mm256_sqrt_ps, _mm256_sub_ps,
+    };
+    if count > COARSE_MAX || count > lanes.len() * LANES {
+        return None;
+    }
+    let frame = Frame::new(surface)?;
+    let [px, py, pz] = frame.point.to_array().map(|v| _mm256_set1_ps(v));
+    let [nx, ny, nz] = frame.normal.to_array().map(|v| _mm256_set1_ps(v));
+    let zero = _mm256_setzero_ps();
+    let one = _mm256_set1_ps(1.0);
+    let below = _mm256_set1_ps(BELOW);
+    let (mut r, mut g, mut b, mut e, mut any) = (zero, zero, zero, zero, zero);
+    let (mut d2_low, mut d2_high, mut largest_high) = (_mm256_set1_ps(f32::INFINITY), zero, zero);
+    let groups = &lanes[..count.div_ceil(LANES)];
+    for (j, group) in groups.iter().enumerate() {
+        // One load each (the compiler folds the eight lanes).
+        let load = |a: &[f32; 8]| _mm256_setr_ps(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]);
+        let (x, y, z) = (load(&group.x), load(&group.y), load(&group.z));
+        let (red, green, blue) = (load(&group.red), load(&group.green), load(&group.blue));
+        let (dx, dy, dz) = (
+            _mm256_sub_ps(x, px),
+            _mm256_sub_ps(y, py),
+            _mm256_sub_ps(z, pz),
+        );
+        let h = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
+            _mm256_mul_ps(nz, dz),
+        );
+        let d2 = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+            _mm256_mul_ps(dz, dz),
+        );
+        let v = _mm256_div_ps(one, d2);
+        let t = _mm256_sqrt_ps(v);
+        let cube = _mm256_mul_ps(v, t);
+        let w = _mm256_max_ps(_mm256_mul_ps(h, cube), zero);
+        let largest = _mm256_max_ps(_mm256_max_ps(red, green), blue);
+        // The lanes past the last light are left out (their terms cleared
+        // to +0, which adds nothing).
+        let rest = count - j * LANES;
+        let mask = (rest < LANES).then(|| {
+            _mm256_cmp_ps::<_CMP_LT_OQ>(
+                _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
+                _mm256_set1_ps(rest as f32),
+            )
+        });
+        let kept = |v| match mask {
+            Some(mask) => _mm256_and_ps(v, mask),
+            None => v,
+        };
+        r = _mm256_add_ps(r, kept(_mm256_mul_ps(red, w)));
+        g = _mm256_add_ps(g, kept(_mm256_mul_ps(green, w)));
+        b = _mm256_add_ps(b, kept(_mm256_mul_ps(blue, w)));
+        // Lights surely below the plane are left out (module docs).
+        let counted = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_mul_ps(h, t), below);
+        let envelope = _mm256_and_ps(_mm256_mul_ps(largest, v), counted);
+        e = _mm256_add_ps(e, kept(envelope));
+        any = _mm256_or_ps(any, kept(counted));
+        d2_low = _mm256_min_ps(d2_low, d2);
+        d2_high = _mm256_max_ps(d2_high, d2);
+        largest_high = _mm256_max_ps(largest_high, largest);
+    }
+    let in_range = _mm256_and_ps(
+        _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GE_OQ>(d2_low, _mm256_set1_ps(D2_MIN)),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(d2_high, _mm256_set1_ps(D2_MAX)),
+        ),
+        _mm256_cmp_ps::<_CMP_LE_OQ>(largest_high, _mm256_set1_ps(INTENSITY_MAX)),
+    );
+    if _mm256_movemask_ps(in_range) != 0xff {
+        return None;
+    }
+    // As in `sum_avx2`.
+    let pairs = _mm256_hadd_ps(_mm256_hadd_ps(r, g), _mm256_hadd_ps(b, e));
+    let sums = _mm_add_ps(
+        _mm256_castps256_ps128(pairs),
+        _mm256_extractf128_ps::<1>(pairs),
+    );
+    let lane = |i: usize| crate::dispatch::lane_of_ps(_mm256_castps128_ps256(sums), i);
+    let counted = _mm256_movemask_ps(any) != 0;
+    Frame::finish([lane(0), lane(1), lane(2)], lane(3), kd, counted, count)
+}
+
 #[cfg(test)]
 mod tests {
     use glam::{DVec3, Vec3};
@@ -385,6 +518,65 @@ mod tests {
             )),
         );
         sum
+    }
+
+    /// The sum of lights side by side gives the bits of the sum of the
+    /// same lights, in both copies, for 0 to 64 lights (a last group full
+    /// or not), in range or not (a light on the point, one at `2^31` of it,
+    /// an intensity past `2^40`), above, in and below the tangent plane,
+    /// and `None` alike where there are fewer groups than lights need.
+    #[test]
+    fn sums_of_lanes_match_sums_of_lights() {
+        let mut state = 31u64;
+        let mut uniform = move || crate::testing::uniform(&mut state);
+        let lambert = Lambert::new(Vec3::new(0.9, 0.5, 0.25));
+        let bits = |r: Option<(DVec3, DVec3)>| {
+            r.map(|(s, e)| {
+                (
+                    s.to_array().map(f64::to_bits),
+                    e.to_array().map(f64::to_bits),
+                )
+            })
+        };
+        let mut kept = 0;
+        for round in 0..1300 {
+            let p = Vec3::new(uniform() * 8.0, uniform() * 8.0, uniform() * 2.0);
+            let normal = Vec3::new(uniform() - 0.5, uniform() - 0.5, 1.0);
+            let surface = Surface::new(p, normal, None).unwrap();
+            let count = round % (COARSE_MAX + 1);
+            let odd = (round / (COARSE_MAX + 1)) % 4;
+            let lights: Vec<PointLight> = (0..count)
+                .map(|i| {
+                    let offset =
+                        Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5) * 20.0;
+                    let mut light =
+                        PointLight::new(p + offset, Vec3::new(uniform(), uniform(), uniform()));
+                    if i == count / 2 {
+                        match odd {
+                            1 => light.position = p,
+                            2 => light.position = p + Vec3::X * 2_147_483_648.0,
+                            3 => light.intensity.y = 2.0e12,
+                            _ => {}
+                        }
+                    }
+                    light
+                })
+                .collect();
+            let lanes = crate::LightLanes::of(&lights);
+            assert_eq!(lanes.len(), count.div_ceil(8));
+            let aos = bits(coarse(&lambert, &surface, &lights));
+            let soa = lambert.sum_lanes_coarse(&(), &surface, &lanes, count);
+            let base = baseline(|| lambert.sum_lanes_coarse(&(), &surface, &lanes, count));
+            assert_eq!(bits(soa), aos, "round {round}, {count} lights");
+            assert_eq!(bits(base), aos, "round {round}, {count} lights");
+            kept += usize::from(aos.is_some());
+            if count > 8 {
+                let short = &lanes[..lanes.len() - 1];
+                assert_eq!(lambert.sum_lanes_coarse(&(), &surface, short, count), None);
+            }
+        }
+        // A quarter of the rounds has every light in range.
+        assert!(kept > 250 && kept < 1050, "{kept} sums in range");
     }
 
     /// The coarse sum against the compensated sum of `eval` (within

@@ -17,7 +17,7 @@ use crate::numeric::{
 use crate::shader::{NodeEstimate, Shader, ViewIndependent, colour_or_clamped, try_colour};
 use crate::tree::groups::{Block, with_block};
 use crate::tree::{LightTree, Node};
-use crate::{PointLight, ShadeError};
+use crate::{LightLanes, PointLight, ShadeError};
 
 /// Which node bound a shader uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -378,6 +378,29 @@ impl Shader for Lambert {
             }
         }
         coarse::sum_baseline(self.kd, surface, lights)
+    }
+
+    /// The same bits as [`sum_lights_coarse`](Shader::sum_lights_coarse)
+    /// on the same lights, each quantity of eight lights loaded at once.
+    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
+    // `dispatch`).
+    #[allow(unsafe_code)]
+    #[inline]
+    fn sum_lanes_coarse(
+        &self,
+        _: &(),
+        surface: &Surface,
+        lanes: &[LightLanes],
+        count: usize,
+    ) -> Option<(DVec3, DVec3)> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::dispatch::avx2() {
+                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+                return unsafe { coarse::sum_lanes_avx2(self.kd, surface, lanes, count) };
+            }
+        }
+        coarse::sum_lanes_baseline(self.kd, surface, lanes, count)
     }
 
     /// With [`BoundKind::Series`], the children side by side in `f32`

@@ -17,11 +17,11 @@ use core::fmt;
 
 use glam::{DVec3, Vec3};
 
-use crate::ShadeError;
 use crate::geometry::Surface;
 use crate::shader::{Shader, ViewIndependent};
 use crate::tree::LightTree;
 use crate::visibility::{Unoccluded, Visibility};
+use crate::{LightLanes, ShadeError};
 
 use blend::{Item, Nesting};
 use error_list::ErrorList;
@@ -51,6 +51,9 @@ pub struct Shading<'t, S: Shader> {
     /// Whether the tree is a small scene, summed rather than cut where its
     /// lights are known visible.
     small_scene: bool,
+    /// A small scene's lights side by side, for the shader's
+    /// [`sum_lanes_coarse`](Shader::sum_lanes_coarse); empty otherwise.
+    small_lanes: Vec<LightLanes>,
     scratch: Scratch,
 }
 
@@ -66,12 +69,23 @@ struct Scratch {
 
 impl LightTree {
     /// A shading session for `shader` over this tree.
+    ///
+    /// For a small scene (at most 768 lights, none of them coincident) the
+    /// session keeps a copy of the lights side by side ([`LightLanes`], 24
+    /// bytes a light), from which the shader sums them (see
+    /// [`shade_query`](Shading::shade_query)).
     #[must_use]
     pub fn shading<S: Shader>(&self, shader: S) -> Shading<'_, S> {
+        let small_scene = self.is_small_scene();
         Shading {
             tree: self,
             shader,
-            small_scene: self.is_small_scene(),
+            small_scene,
+            small_lanes: if small_scene {
+                LightLanes::of(&self.lights)
+            } else {
+                Vec::new()
+            },
             scratch: Scratch::default(),
         }
     }
@@ -108,11 +122,17 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// of at most 32 lights, and without a budget those of at most 512
     /// lights near the point for their size (`n D^2 <= 512 R^2` for `n`
     /// lights within `R` of a centroid at distance `D`), are summed light by
-    /// light when they enter the cut, and a tree of at most 256 lights (none
-    /// of them coincident) whose lights are known visible is summed whole
-    /// when its root alone does not meet the threshold (not with
-    /// interpolation across levels, whose blend needs bounded nodes, nor
-    /// beyond the budget). Summed lights carry no error.
+    /// light when they enter the cut, and a tree of at most 256 lights (768
+    /// where the threshold lets lights be summed coarsely, see
+    /// [`Shader::sum_lights_coarse`]; none of them coincident) whose lights
+    /// are known visible is summed whole when its root alone does not meet
+    /// the threshold (not with interpolation across levels, whose blend
+    /// needs bounded nodes, nor beyond the budget). Summed lights carry no
+    /// error beyond the coarse sums' certified rounding. A small scene keeps
+    /// its lights side by side as well ([`LightLanes`], 24 bytes a light,
+    /// in the session), for the shader's
+    /// [`Shader::sum_lanes_coarse`]; when the point lies in the root's ball
+    /// it is summed at once, without setting up the cut (the same result).
     ///
     /// `visibility` is the host's ray tracer ([`Visibility`]); pass
     /// [`Unoccluded`] for none, or `&mut host` to keep the host.
@@ -179,6 +199,17 @@ impl<'t, S: Shader> Shading<'t, S> {
         threshold: Threshold,
         visibility: V,
     ) -> ShadeResult {
+        if self.small_scene
+            && let Some(result) = refine::shade_small_scene::<S, V>(
+                self.tree,
+                &self.shader,
+                &self.small_lanes,
+                surface,
+                &threshold,
+            )
+        {
+            return result;
+        }
         let mut cut = Cut::new(
             self.tree,
             &self.shader,
@@ -186,7 +217,7 @@ impl<'t, S: Shader> Shading<'t, S> {
             point,
             &threshold,
             visibility,
-            self.small_scene,
+            self.small_scene.then_some(&self.small_lanes[..]),
         );
         let list = &mut self.scratch.list;
         let nesting = &mut self.scratch.nesting;
@@ -278,5 +309,85 @@ impl<S: ViewIndependent> Shading<'_, S> {
     /// [`ShadeError::NonFinitePoint`], [`ShadeError::InvalidNormal`].
     pub fn exact(&self, point: Vec3, normal: Vec3) -> Result<DVec3, ShadeError> {
         Ok(self.exact_query(&Query::new(point, normal)?, Unoccluded))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::{Query, ShadeResult, Threshold};
+    use crate::{Lambert, LightTree, PointLight, Unoccluded};
+
+    fn bits(r: &ShadeResult) -> ([u64; 3], [u64; 3], [u32; 4], super::Stop) {
+        (
+            r.radiance.to_array().map(f64::to_bits),
+            r.error_bound.to_array().map(f64::to_bits),
+            [
+                r.nodes_evaluated,
+                r.lights_evaluated,
+                r.classify_queries,
+                r.point_queries,
+            ],
+            r.stop,
+        )
+    }
+
+    /// A small scene summed from its lights side by side, without setting
+    /// up the cut, gives the bits and counts of the cut over the same tree
+    /// without them (which sums the lights one record at a time): scenes
+    /// of 2 to 768 lights, points inside and outside the root's ball, and
+    /// thresholds with and without coarse sums, budgets and interpolation.
+    #[test]
+    fn small_scenes_summed_side_by_side_match_the_cut() {
+        let mut state = 37u64;
+        let mut uniform = move || crate::testing::uniform(&mut state);
+        let mut fast = 0;
+        for (round, count) in [2usize, 7, 8, 9, 64, 65, 100, 300, 512, 767, 768]
+            .into_iter()
+            .enumerate()
+        {
+            let lights: Vec<PointLight> = (0..count)
+                .map(|_| {
+                    let p = Vec3::new(uniform() * 40.0, uniform() * 40.0, 4.0 + uniform());
+                    let i = Vec3::new(uniform(), uniform(), uniform()) * 10.0;
+                    PointLight::new(p, i)
+                })
+                .collect();
+            let tree = LightTree::build(&lights).unwrap();
+            let lambert = Lambert::new(Vec3::new(0.8, 0.6, 0.4));
+            let mut with = tree.shading(lambert);
+            let mut without = tree.shading(lambert);
+            assert!(with.small_scene && !with.small_lanes.is_empty());
+            without.small_lanes.clear();
+            for k in 0..40 {
+                let far = if k % 4 == 3 { 400.0 } else { 1.0 };
+                let point = Vec3::new(uniform() * 40.0, uniform() * 40.0, 0.0) * far;
+                let normal = Vec3::new(uniform() - 0.5, uniform() - 0.5, 1.0);
+                let query = Query::new(point, normal).unwrap();
+                let threshold = match (k + round) % 6 {
+                    0 => Threshold::relative(0.3),
+                    1 => Threshold::relative(0.01),
+                    2 => Threshold::relative(1e-5),
+                    3 => Threshold::absolute(1e-3),
+                    4 => Threshold::relative(0.01).with_budget(count as u32 / 2 + 1),
+                    _ => Threshold::relative(0.01).with_interpolation(2.0),
+                };
+                let a = with.shade_query(&query, threshold, Unoccluded).unwrap();
+                let b = without.shade_query(&query, threshold, Unoccluded).unwrap();
+                assert_eq!(bits(&a), bits(&b), "{count} lights, point {k}");
+                fast += usize::from(
+                    super::refine::shade_small_scene::<_, Unoccluded>(
+                        &tree,
+                        &lambert,
+                        &with.small_lanes,
+                        query.surface(),
+                        &threshold,
+                    )
+                    .is_some(),
+                );
+            }
+        }
+        assert!(fast > 60 && fast < 400, "{fast} sums without the cut");
     }
 }

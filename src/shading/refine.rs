@@ -6,14 +6,14 @@ use glam::{DVec3, Vec3};
 
 use super::blend::{NO_PARENT, Nesting};
 use super::error_list::{Class, Entry, ErrorList, Seen};
-use super::result::Stop;
+use super::result::{ShadeResult, Stop};
 use super::threshold::Threshold;
 use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, NAIVE_DOT_ACCEPT, SUM_SLACK, plain_dot_of_difference};
 use crate::shader::{COARSE_LIGHTS_MAX, COARSE_TARGET_MIN, NodeEstimate, SUM_LIGHTS_MAX, Shader};
 use crate::tree::{LightTree, NO_PLANE, Node, SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
-use crate::{PointLight, Target};
+use crate::{LightLanes, PointLight, Target};
 
 /// One shading call's state: what it reads (tree, shader, the point), the
 /// host it asks, and what it has settled and spent so far.
@@ -40,6 +40,9 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     /// Whether the tree is a small scene, summed light by light rather than
     /// cut (see [`Cut::sums_whole_scene`]).
     small_scene: bool,
+    /// A small scene's lights side by side (empty otherwise), for the
+    /// shader's [`Shader::sum_lanes_coarse`].
+    small_lanes: &'a [LightLanes],
     pub(crate) visibility: V,
     /// Exact leaves and nodes that need no refinement.
     pub(crate) settled: CompensatedSum,
@@ -90,7 +93,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         point: Vec3,
         threshold: &Threshold,
         visibility: V,
-        small_scene: bool,
+        small_lanes: Option<&'a [LightLanes]>,
     ) -> Self {
         Self {
             tree,
@@ -111,7 +114,8 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 NEAR_NODE_LIGHTS
             },
             one_by_one: threshold.is_exact(),
-            small_scene,
+            small_scene: small_lanes.is_some(),
+            small_lanes: small_lanes.unwrap_or_default(),
             visibility,
             settled: CompensatedSum::default(),
             settled_error: DVec3::ZERO,
@@ -586,6 +590,17 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         if seen == Seen::Visible && !self.one_by_one {
             self.lights += range.len() as u32;
             if let Some(share) = self.coarse {
+                if range.start == 0
+                    && range.end == tree.lights.len()
+                    && !self.small_lanes.is_empty()
+                {
+                    // The whole of a small scene: its lights side by side.
+                    let groups = self.small_lanes.chunks(COARSE_LIGHTS_MAX / 8);
+                    for (lights, lanes) in tree.lights.chunks(COARSE_LIGHTS_MAX).zip(groups) {
+                        self.sum_lanes_coarse(lights, lanes, share, weight);
+                    }
+                    return;
+                }
                 for lights in tree.lights[range].chunks(COARSE_LIGHTS_MAX) {
                     self.sum_seen_coarse(lights, share, weight);
                 }
@@ -713,6 +728,26 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             }
             _ => self.sum_visible(lights, weight),
         }
+    }
+
+    /// [`sum_seen_coarse`](Self::sum_seen_coarse) of `lights`, which
+    /// `lanes` hold side by side (see [`settle_lanes`]).
+    #[inline(always)]
+    fn sum_lanes_coarse(
+        &mut self,
+        lights: &[PointLight],
+        lanes: &[LightLanes],
+        share: f64,
+        weight: f64,
+    ) {
+        settle_lanes(
+            self.shader,
+            &self.per_point,
+            self.surface,
+            (lights, lanes),
+            (share, weight),
+            (&mut self.settled, &mut self.settled_error),
+        );
     }
 
     /// The sum of `lights`, known visible, times `weight`, settled: a
@@ -876,6 +911,102 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             }
         }
     }
+}
+
+/// The sum of `lights` (at most [`COARSE_LIGHTS_MAX`]), visible, which
+/// `lanes` hold side by side, times `weight`, settled into `settled` and
+/// its error into `error`: the shader's [`Shader::sum_lanes_coarse`] where
+/// it has one, else its [`Shader::sum_lights_coarse`], kept where the
+/// sum's error is at most `share` of it channel by channel; else a plain
+/// sum a chunk at a time, as [`Cut::sum_visible`].
+#[inline(always)]
+fn settle_lanes<S: Shader>(
+    shader: &S,
+    per_point: &S::PerPoint,
+    surface: &Surface,
+    (lights, lanes): (&[PointLight], &[LightLanes]),
+    (share, weight): (f64, f64),
+    (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
+) {
+    let sum = shader
+        .sum_lanes_coarse(per_point, surface, lanes, lights.len())
+        .or_else(|| shader.sum_lights_coarse(per_point, surface, lights));
+    match sum {
+        Some((sum, error)) if error.cmple(sum * share).all() => {
+            settled.add(sum * weight);
+            *error_sum += error * weight;
+        }
+        _ => {
+            for lights in lights.chunks(SUM_LIGHTS_MAX) {
+                settled.add(shader.sum_lights(per_point, surface, lights) * weight);
+            }
+        }
+    }
+}
+
+/// The cut of a small scene whose lights are known visible (`lanes` side
+/// by side, see [`Cut::sums_whole_scene`]) when the shading point lies in
+/// the root's ball, which has then no bound: the cut would count the root,
+/// find it unbounded and sum the whole scene. This is that sum, without
+/// setting up the cut, so the same bits and counts; `None` wherever the
+/// cut would take another step first (a dark root, a plane at or below the
+/// horizon, a bounded root, interpolation, a target for which lights are
+/// not summed coarsely, a budget the sum would exceed), and the caller
+/// runs the cut.
+#[inline(always)]
+pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
+    tree: &LightTree,
+    shader: &S,
+    lanes: &[LightLanes],
+    surface: &Surface,
+    threshold: &Threshold,
+) -> Option<ShadeResult> {
+    let root = tree.nodes.first()?;
+    let count = tree.lights.len();
+    let share = match threshold.target() {
+        Target::Relative(t)
+            if threshold.interpolation().is_none() && t >= COARSE_TARGET_MIN && t.is_finite() =>
+        {
+            t / 32.0
+        }
+        _ => return None,
+    };
+    let budget = threshold.budget().unwrap_or(u32::MAX).max(1);
+    let lights = root.light_count;
+    if !V::ALWAYS_VISIBLE
+        || lanes.is_empty()
+        || lights > SMALL_SCENE_LIGHTS_COARSE
+        || 1u32.saturating_add(lights) > budget
+        || root.intensity == DVec3::ZERO
+        || root.radius == 0.0
+        || tree.node_plane(0).is_some()
+        || root.cone(surface.point).is_some()
+    {
+        return None;
+    }
+    let per_point = shader.prepare(surface);
+    let (mut settled, mut settled_error) = (CompensatedSum::default(), DVec3::ZERO);
+    let groups = lanes.chunks(COARSE_LIGHTS_MAX / 8);
+    for (lights, lanes) in tree.lights[..count].chunks(COARSE_LIGHTS_MAX).zip(groups) {
+        settle_lanes(
+            shader,
+            &per_point,
+            surface,
+            (lights, lanes),
+            (share, 1.0),
+            (&mut settled, &mut settled_error),
+        );
+    }
+    // As the cut's end with an empty error list: its sums are +0.
+    Some(ShadeResult {
+        radiance: settled.value() + DVec3::ZERO,
+        error_bound: reported_bound(DVec3::ZERO + settled_error),
+        nodes_evaluated: 1,
+        lights_evaluated: lights,
+        classify_queries: 0,
+        point_queries: 0,
+        stop: Stop::ThresholdMet,
+    })
 }
 
 /// Node evaluations after which a cut bounds children in `f64` only

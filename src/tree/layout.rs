@@ -225,13 +225,16 @@ pub(crate) const NO_PLANE: u32 = u32::MAX;
 pub(crate) const SMALL_SCENE_LIGHTS: u32 = 256;
 
 /// [`SMALL_SCENE_LIGHTS`] where the lights are summed coarsely
-/// ([`Shader::sum_lights_coarse`](crate::Shader::sum_lights_coarse), for
-/// relative targets of at least `2^-12`; `Lambert` about 2.6-3 ns per
-/// light in groups of 64). Measured the same way, two alternating runs:
-/// at 512 lights the sum took 1.28-1.79 us per point against the cut's
-/// 1.63-2.46 at 30%, 10% and 1%; at 1,000 lights 2.56-3.89 against
-/// 1.92-3.12, the cut winning at 30% and 10%.
-pub(crate) const SMALL_SCENE_LIGHTS_COARSE: u32 = 512;
+/// ([`Shader::sum_lanes_coarse`](crate::Shader::sum_lanes_coarse), for
+/// relative targets of at least `2^-12`; `Lambert` under 2 ns per light
+/// from lights kept side by side, in groups of 64). Measured on the
+/// street city, one point at a time, alternating with the vectorized exact
+/// sum (medians of 61 passes, two runs each): at a certified 1%, with the
+/// limit at 512 and at 1,024, the sum took 1.16 us per point at 700 lights
+/// against the cut's 1.38-1.41, 1.32-1.37 at 800 against 1.53-1.56, but
+/// 2.16-2.24 at 1,000 against 1.87; at 30% it took 0.97-1.03 us at 600
+/// lights against 1.19, and 1.27 at 800 as the cut did.
+pub(crate) const SMALL_SCENE_LIGHTS_COARSE: u32 = 768;
 
 impl LightTree {
     /// Whether the tree may be a small scene (see [`SMALL_SCENE_LIGHTS`]
