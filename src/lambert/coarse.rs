@@ -208,9 +208,138 @@ pub(crate) fn sum_baseline(
     Frame::total(&sums, kd, lights.len())
 }
 
-/// [`sum_baseline`] with AVX2 instructions for the full chunks of eight:
-/// the same operations lane by lane (no fused multiply-add), so the same
-/// bits.
+/// The AVX2 sums of [`sum_avx2`] and [`sum_lanes_avx2`]: per lane, the
+/// operations of [`Frame::add`] (no fused multiply-add), so the same bits
+/// as the baseline. The range is checked in every lane added, those left
+/// out included: they repeat a light that is added.
+#[cfg(target_arch = "x86_64")]
+struct Sums8 {
+    point: [core::arch::x86_64::__m256; 3],
+    normal: [core::arch::x86_64::__m256; 3],
+    rgb: [core::arch::x86_64::__m256; 3],
+    envelope: core::arch::x86_64::__m256,
+    any: core::arch::x86_64::__m256,
+    /// All bits set in the lanes whose every light so far was in range.
+    in_range: core::arch::x86_64::__m256,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Sums8 {
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn new(frame: &Frame) -> Self {
+        use core::arch::x86_64::{_CMP_LE_OQ, _mm256_cmp_ps, _mm256_set1_ps, _mm256_setzero_ps};
+        let zero = _mm256_setzero_ps();
+        Self {
+            point: frame.point.to_array().map(|v| _mm256_set1_ps(v)),
+            normal: frame.normal.to_array().map(|v| _mm256_set1_ps(v)),
+            rgb: [zero; 3],
+            envelope: zero,
+            any: zero,
+            in_range: _mm256_cmp_ps::<_CMP_LE_OQ>(zero, zero),
+        }
+    }
+
+    /// Eight lights' terms (`x, y, z, red, green, blue`, one vector each),
+    /// added to the lanes that `mask` keeps (all for `None`).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn add(
+        &mut self,
+        [x, y, z, red, green, blue]: [core::arch::x86_64::__m256; 6],
+        mask: Option<core::arch::x86_64::__m256>,
+    ) {
+        use core::arch::x86_64::{
+            __m256, _CMP_GE_OQ, _CMP_LE_OQ, _mm256_add_ps, _mm256_and_ps, _mm256_cmp_ps,
+            _mm256_div_ps, _mm256_max_ps, _mm256_mul_ps, _mm256_or_ps, _mm256_set1_ps,
+            _mm256_setzero_ps, _mm256_sqrt_ps, _mm256_sub_ps,
+        };
+        let ([px, py, pz], [nx, ny, nz]) = (self.point, self.normal);
+        let (dx, dy, dz) = (
+            _mm256_sub_ps(x, px),
+            _mm256_sub_ps(y, py),
+            _mm256_sub_ps(z, pz),
+        );
+        let h = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
+            _mm256_mul_ps(nz, dz),
+        );
+        let d2 = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+            _mm256_mul_ps(dz, dz),
+        );
+        // One division and one square root per eight lights (module docs).
+        let v = _mm256_div_ps(_mm256_set1_ps(1.0), d2);
+        let t = _mm256_sqrt_ps(v);
+        let cube = _mm256_mul_ps(v, t);
+        let w = _mm256_max_ps(_mm256_mul_ps(h, cube), _mm256_setzero_ps());
+        let largest = _mm256_max_ps(_mm256_max_ps(red, green), blue);
+        let kept = |v: __m256| match mask {
+            Some(mask) => _mm256_and_ps(v, mask),
+            None => v,
+        };
+        for (sum, channel) in self.rgb.iter_mut().zip([red, green, blue]) {
+            *sum = _mm256_add_ps(*sum, kept(_mm256_mul_ps(channel, w)));
+        }
+        // Lights surely below the plane are left out (module docs).
+        let counted = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_mul_ps(h, t), _mm256_set1_ps(BELOW));
+        let envelope = _mm256_and_ps(_mm256_mul_ps(largest, v), counted);
+        self.envelope = _mm256_add_ps(self.envelope, kept(envelope));
+        self.any = _mm256_or_ps(self.any, kept(counted));
+        let ok = _mm256_and_ps(
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(d2, _mm256_set1_ps(D2_MIN)),
+                _mm256_cmp_ps::<_CMP_LE_OQ>(d2, _mm256_set1_ps(D2_MAX)),
+            ),
+            _mm256_cmp_ps::<_CMP_LE_OQ>(largest, _mm256_set1_ps(INTENSITY_MAX)),
+        );
+        self.in_range = _mm256_and_ps(self.in_range, ok);
+    }
+
+    /// The lanes' sums, each added as `((l0 + l1) + (l2 + l3)) + ((l4 +
+    /// l5) + (l6 + l7))`, times `kd`, and the bound for `count` lights; or
+    /// `None` out of range (see [`Frame::finish`]).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn finish(&self, kd: DVec3, count: usize) -> Option<(DVec3, DVec3)> {
+        use core::arch::x86_64::{
+            _mm_add_ps, _mm256_castps128_ps256, _mm256_castps256_ps128, _mm256_extractf128_ps,
+            _mm256_hadd_ps, _mm256_movemask_ps,
+        };
+        if _mm256_movemask_ps(self.in_range) != 0xff {
+            return None;
+        }
+        let [r, g, b] = self.rgb;
+        // Per vector, its lanes added pairwise, the four vectors side by
+        // side.
+        let pairs = _mm256_hadd_ps(_mm256_hadd_ps(r, g), _mm256_hadd_ps(b, self.envelope));
+        let sums = _mm_add_ps(
+            _mm256_castps256_ps128(pairs),
+            _mm256_extractf128_ps::<1>(pairs),
+        );
+        let lane = |i: usize| crate::dispatch::lane_of_ps(_mm256_castps128_ps256(sums), i);
+        let counted = _mm256_movemask_ps(self.any) != 0;
+        Frame::finish([lane(0), lane(1), lane(2)], lane(3), kd, counted, count)
+    }
+}
+
+/// The lanes that hold one of the last `rest` lights of a run (lanes 0 to
+/// `rest - 1`), or `None` for a full group of eight.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn last_lanes(rest: usize) -> Option<core::arch::x86_64::__m256> {
+    use core::arch::x86_64::{_CMP_LT_OQ, _mm256_cmp_ps, _mm256_set1_ps, _mm256_setr_ps};
+    (rest < LANES).then(|| {
+        _mm256_cmp_ps::<_CMP_LT_OQ>(
+            _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
+            _mm256_set1_ps(rest as f32),
+        )
+    })
+}
+
+/// [`sum_baseline`] with AVX2 instructions ([`Sums8`]), eight lights at a
+/// time, each gathered from its record: the same bits.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 pub(crate) fn sum_avx2(
@@ -219,37 +348,22 @@ pub(crate) fn sum_avx2(
     lights: &[PointLight],
 ) -> Option<(DVec3, DVec3)> {
     use core::arch::x86_64::{
-        __m128, __m256, _CMP_GE_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _mm_add_ps, _mm_set_ps, _mm256_add_ps,
-        _mm256_and_ps, _mm256_andnot_ps, _mm256_castps128_ps256, _mm256_castps256_ps128,
-        _mm256_cmp_ps, _mm256_div_ps, _mm256_extractf128_ps, _mm256_hadd_ps, _mm256_max_ps,
-        _mm256_movemask_ps, _mm256_mul_ps, _mm256_or_ps, _mm256_set_m128, _mm256_set1_ps,
-        _mm256_setr_ps, _mm256_setzero_ps, _mm256_shuffle_ps, _mm256_sqrt_ps, _mm256_sub_ps,
-        _mm256_unpackhi_ps, _mm256_unpacklo_ps,
+        __m128, _mm_set_ps, _mm256_set_m128, _mm256_shuffle_ps, _mm256_unpackhi_ps,
+        _mm256_unpacklo_ps,
     };
     if lights.len() > COARSE_MAX {
         return None;
     }
     let frame = Frame::new(surface)?;
-    let [px, py, pz] = frame.point.to_array().map(|v| _mm256_set1_ps(v));
-    let [nx, ny, nz] = frame.normal.to_array().map(|v| _mm256_set1_ps(v));
-    let zero = _mm256_setzero_ps();
-    let one = _mm256_set1_ps(1.0);
-    let (d2_min, d2_max) = (_mm256_set1_ps(D2_MIN), _mm256_set1_ps(D2_MAX));
-    let intensity_max = _mm256_set1_ps(INTENSITY_MAX);
-    let below = _mm256_set1_ps(BELOW);
-    let (mut r, mut g, mut b, mut e, mut any) = (zero, zero, zero, zero, zero);
-    let all = _mm256_cmp_ps::<_CMP_LE_OQ>(zero, zero);
-    let mut in_range = all;
-    // Up to eight lights' terms, added to the lanes that `mask` keeps; lane
-    // `k` reads light `min(k, len - 1)` where it lies (a padded copy of the
-    // last chunk would be stored and loaded back in pieces of different
-    // widths, which stalls the loads). A macro rather than a closure: a
-    // closure used twice is compiled out of line, a call per eight lights.
-    // One division and one square root per eight lights (module docs).
-    macro_rules! add {
-        ($chunk:expr, $mask:expr) => {{
-            // `None` for a full chunk: no lane is left out.
-            let (chunk, mask): (&[PointLight], Option<__m256>) = ($chunk, $mask);
+    let mut sums = Sums8::new(&frame);
+    // Lane `k` reads light `min(k, len - 1)` where it lies (a padded copy
+    // of the last chunk would be stored and loaded back in pieces of
+    // different widths, which stalls the loads). A macro rather than a
+    // closure: a closure used twice is compiled out of line, a call per
+    // eight lights.
+    macro_rules! gather {
+        ($chunk:expr) => {{
+            let chunk: &[PointLight] = $chunk;
             let last = chunk.len() - 1;
             let at = |k: usize| &chunk[k.min(last)];
             // (x, y, z, red) of lights k and k + 4 in one vector's halves,
@@ -258,13 +372,9 @@ pub(crate) fn sum_avx2(
                 _mm_set_ps(l.intensity.x, l.position.z, l.position.y, l.position.x)
             };
             let pair = |k: usize| _mm256_set_m128(row(at(k + 4)), row(at(k)));
-            let (a, b_, c, d) = (pair(0), pair(1), pair(2), pair(3));
-            let (t0, t1) = (_mm256_unpacklo_ps(a, b_), _mm256_unpackhi_ps(a, b_));
+            let (a, b, c, d) = (pair(0), pair(1), pair(2), pair(3));
+            let (t0, t1) = (_mm256_unpacklo_ps(a, b), _mm256_unpackhi_ps(a, b));
             let (t2, t3) = (_mm256_unpacklo_ps(c, d), _mm256_unpackhi_ps(c, d));
-            let x = _mm256_shuffle_ps::<0x44>(t0, t2);
-            let y = _mm256_shuffle_ps::<0xEE>(t0, t2);
-            let z = _mm256_shuffle_ps::<0x44>(t1, t3);
-            let red = _mm256_shuffle_ps::<0xEE>(t1, t3);
             // (green, blue) of lights k and k + 1, and k + 4 and k + 5.
             let duo = |k: usize| -> __m128 {
                 let (l, m) = (at(k), at(k + 1));
@@ -272,89 +382,27 @@ pub(crate) fn sum_avx2(
             };
             let gb01 = _mm256_set_m128(duo(4), duo(0));
             let gb23 = _mm256_set_m128(duo(6), duo(2));
-            let green = _mm256_shuffle_ps::<0x88>(gb01, gb23);
-            let blue = _mm256_shuffle_ps::<0xDD>(gb01, gb23);
-            let (dx, dy, dz) = (
-                _mm256_sub_ps(x, px),
-                _mm256_sub_ps(y, py),
-                _mm256_sub_ps(z, pz),
-            );
-            let h = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
-                _mm256_mul_ps(nz, dz),
-            );
-            let d2 = _mm256_add_ps(
-                _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
-                _mm256_mul_ps(dz, dz),
-            );
-            let v = _mm256_div_ps(one, d2);
-            let t = _mm256_sqrt_ps(v);
-            let cube = _mm256_mul_ps(v, t);
-            let w = _mm256_max_ps(_mm256_mul_ps(h, cube), zero);
-            let largest = _mm256_max_ps(_mm256_max_ps(red, green), blue);
-            let kept = |v: __m256| match mask {
-                Some(mask) => _mm256_and_ps(v, mask),
-                None => v,
-            };
-            r = _mm256_add_ps(r, kept(_mm256_mul_ps(red, w)));
-            g = _mm256_add_ps(g, kept(_mm256_mul_ps(green, w)));
-            b = _mm256_add_ps(b, kept(_mm256_mul_ps(blue, w)));
-            // Lights surely below the plane are left out (module docs).
-            let counted = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_mul_ps(h, t), below);
-            let envelope = _mm256_and_ps(_mm256_mul_ps(largest, v), counted);
-            e = _mm256_add_ps(e, kept(envelope));
-            any = _mm256_or_ps(any, kept(counted));
-            let ok = _mm256_and_ps(
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(d2, d2_min),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(d2, d2_max),
-                ),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(largest, intensity_max),
-            );
-            // Lanes left out count as in range.
-            in_range = _mm256_and_ps(
-                in_range,
-                match mask {
-                    Some(mask) => _mm256_or_ps(ok, _mm256_andnot_ps(mask, all)),
-                    None => ok,
-                },
-            );
+            [
+                _mm256_shuffle_ps::<0x44>(t0, t2),
+                _mm256_shuffle_ps::<0xEE>(t0, t2),
+                _mm256_shuffle_ps::<0x44>(t1, t3),
+                _mm256_shuffle_ps::<0xEE>(t1, t3),
+                _mm256_shuffle_ps::<0x88>(gb01, gb23),
+                _mm256_shuffle_ps::<0xDD>(gb01, gb23),
+            ]
         }};
     }
     let chunks = lights.chunks_exact(LANES);
     let rest = chunks.remainder();
     for chunk in chunks {
-        add!(chunk, None);
+        sums.add(gather!(chunk), None);
     }
     if !rest.is_empty() {
-        // The last lights in lanes 0 onwards; the other lanes repeat the
-        // last of them and are left out (their terms cleared to +0, which
-        // adds nothing).
-        let mask = _mm256_cmp_ps::<_CMP_LT_OQ>(
-            _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
-            _mm256_set1_ps(rest.len() as f32),
-        );
-        add!(rest, Some(mask));
+        // The lanes past the last light are left out (their terms cleared
+        // to +0, which adds nothing).
+        sums.add(gather!(rest), last_lanes(rest.len()));
     }
-    if _mm256_movemask_ps(in_range) != 0xff {
-        return None;
-    }
-    // Per vector, its lanes added as ((l0 + l1) + (l2 + l3)) + ((l4 + l5)
-    // + (l6 + l7)), the four vectors side by side.
-    let pairs = _mm256_hadd_ps(_mm256_hadd_ps(r, g), _mm256_hadd_ps(b, e));
-    let sums = _mm_add_ps(
-        _mm256_castps256_ps128(pairs),
-        _mm256_extractf128_ps::<1>(pairs),
-    );
-    let lane = |i: usize| crate::dispatch::lane_of_ps(_mm256_castps128_ps256(sums), i);
-    let counted = _mm256_movemask_ps(any) != 0;
-    Frame::finish(
-        [lane(0), lane(1), lane(2)],
-        lane(3),
-        kd,
-        counted,
-        lights.len(),
-    )
+    sums.finish(kd, lights.len())
 }
 
 /// [`sum_baseline`] of the `count` lights that `lanes` hold side by side
@@ -387,13 +435,8 @@ pub(crate) fn sum_lanes_baseline(
     Frame::total(&sums, kd, count)
 }
 
-/// [`sum_lanes_baseline`] with AVX2 instructions: each quantity of eight
-/// lights one load, then the operations of [`sum_avx2`] lane by lane, so
-/// the same bits. The range is checked on the smallest and largest
-/// squared distance and the largest channel over the lanes (a spare lane
-/// repeats a light, so it moves none of them), which decides as the
-/// lane-by-lane comparisons do: no squared distance is NaN (the
-/// coordinates are finite), and no channel is.
+/// [`sum_lanes_baseline`] with AVX2 instructions ([`Sums8`]): each
+/// quantity of eight lights one load, so the same bits.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 pub(crate) fn sum_lanes_avx2(
@@ -402,92 +445,38 @@ pub(crate) fn sum_lanes_avx2(
     lanes: &[LightLanes],
     count: usize,
 ) -> Option<(DVec3, DVec3)> {
-    use core::arch::x86_64::{
-        _CMP_GE_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _mm_add_ps, _mm256_add_ps, _mm256_and_ps,
-        _mm256_castps128_ps256, _mm256_castps256_ps128, _mm256_cmp_ps, _mm256_div_ps,
-        _mm256_extractf128_ps, _mm256_hadd_ps, _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps,
-        _mm256_mul_ps, _mm256_or_ps, _mm256_set1_ps, _mm256_setr_ps, _mm256_setzero_ps,
-        _mm256_sqrt_ps, _mm256_sub_ps,
-    };
+    use core::arch::x86_64::_mm256_setr_ps;
     if count > COARSE_MAX || count > lanes.len() * LANES {
         return None;
     }
     let frame = Frame::new(surface)?;
-    let [px, py, pz] = frame.point.to_array().map(|v| _mm256_set1_ps(v));
-    let [nx, ny, nz] = frame.normal.to_array().map(|v| _mm256_set1_ps(v));
-    let zero = _mm256_setzero_ps();
-    let one = _mm256_set1_ps(1.0);
-    let below = _mm256_set1_ps(BELOW);
-    let (mut r, mut g, mut b, mut e, mut any) = (zero, zero, zero, zero, zero);
-    let (mut d2_low, mut d2_high, mut largest_high) = (_mm256_set1_ps(f32::INFINITY), zero, zero);
-    let groups = &lanes[..count.div_ceil(LANES)];
-    for (j, group) in groups.iter().enumerate() {
-        // One load each (the compiler folds the eight lanes).
-        let load = |a: &[f32; 8]| _mm256_setr_ps(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]);
-        let (x, y, z) = (load(&group.x), load(&group.y), load(&group.z));
-        let (red, green, blue) = (load(&group.red), load(&group.green), load(&group.blue));
-        let (dx, dy, dz) = (
-            _mm256_sub_ps(x, px),
-            _mm256_sub_ps(y, py),
-            _mm256_sub_ps(z, pz),
-        );
-        let h = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(nx, dx), _mm256_mul_ps(ny, dy)),
-            _mm256_mul_ps(nz, dz),
-        );
-        let d2 = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
-            _mm256_mul_ps(dz, dz),
-        );
-        let v = _mm256_div_ps(one, d2);
-        let t = _mm256_sqrt_ps(v);
-        let cube = _mm256_mul_ps(v, t);
-        let w = _mm256_max_ps(_mm256_mul_ps(h, cube), zero);
-        let largest = _mm256_max_ps(_mm256_max_ps(red, green), blue);
-        // The lanes past the last light are left out (their terms cleared
-        // to +0, which adds nothing).
-        let rest = count - j * LANES;
-        let mask = (rest < LANES).then(|| {
-            _mm256_cmp_ps::<_CMP_LT_OQ>(
-                _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
-                _mm256_set1_ps(rest as f32),
-            )
-        });
-        let kept = |v| match mask {
-            Some(mask) => _mm256_and_ps(v, mask),
-            None => v,
-        };
-        r = _mm256_add_ps(r, kept(_mm256_mul_ps(red, w)));
-        g = _mm256_add_ps(g, kept(_mm256_mul_ps(green, w)));
-        b = _mm256_add_ps(b, kept(_mm256_mul_ps(blue, w)));
-        // Lights surely below the plane are left out (module docs).
-        let counted = _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_mul_ps(h, t), below);
-        let envelope = _mm256_and_ps(_mm256_mul_ps(largest, v), counted);
-        e = _mm256_add_ps(e, kept(envelope));
-        any = _mm256_or_ps(any, kept(counted));
-        d2_low = _mm256_min_ps(d2_low, d2);
-        d2_high = _mm256_max_ps(d2_high, d2);
-        largest_high = _mm256_max_ps(largest_high, largest);
+    let mut sums = Sums8::new(&frame);
+    // Each quantity one load (the compiler folds the eight lanes). A macro
+    // rather than a closure, as in `sum_avx2`.
+    macro_rules! load {
+        ($group:expr) => {{
+            let g: &LightLanes = $group;
+            let load =
+                |a: &[f32; 8]| _mm256_setr_ps(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]);
+            [
+                load(&g.x),
+                load(&g.y),
+                load(&g.z),
+                load(&g.red),
+                load(&g.green),
+                load(&g.blue),
+            ]
+        }};
     }
-    let in_range = _mm256_and_ps(
-        _mm256_and_ps(
-            _mm256_cmp_ps::<_CMP_GE_OQ>(d2_low, _mm256_set1_ps(D2_MIN)),
-            _mm256_cmp_ps::<_CMP_LE_OQ>(d2_high, _mm256_set1_ps(D2_MAX)),
-        ),
-        _mm256_cmp_ps::<_CMP_LE_OQ>(largest_high, _mm256_set1_ps(INTENSITY_MAX)),
-    );
-    if _mm256_movemask_ps(in_range) != 0xff {
-        return None;
+    let (full, rest) = (count / LANES, count % LANES);
+    for group in &lanes[..full] {
+        sums.add(load!(group), None);
     }
-    // As in `sum_avx2`.
-    let pairs = _mm256_hadd_ps(_mm256_hadd_ps(r, g), _mm256_hadd_ps(b, e));
-    let sums = _mm_add_ps(
-        _mm256_castps256_ps128(pairs),
-        _mm256_extractf128_ps::<1>(pairs),
-    );
-    let lane = |i: usize| crate::dispatch::lane_of_ps(_mm256_castps128_ps256(sums), i);
-    let counted = _mm256_movemask_ps(any) != 0;
-    Frame::finish([lane(0), lane(1), lane(2)], lane(3), kd, counted, count)
+    if rest > 0 {
+        // The lanes past the last light are left out.
+        sums.add(load!(&lanes[full]), last_lanes(rest));
+    }
+    sums.finish(kd, count)
 }
 
 #[cfg(test)]
