@@ -945,20 +945,17 @@ fn settle_lanes<S: Shader>(
 }
 
 /// The cut of a small scene whose lights are known visible (`lanes` side
-/// by side, see [`Cut::sums_whole_scene`]), summed without setting up the
-/// cut, or `None` where the caller runs the cut:
-///
-/// * when the shading point lies in the root's ball, which has then no
-///   bound: the cut would count the root, find it unbounded and sum the
-///   whole scene. This is that sum, so the same bits and counts. Not
-///   where the cut would take another step first: a dark root, a plane
-///   at or below the horizon, a single light (summed exactly), a target
-///   for which lights are not summed coarsely, interpolation, a budget
-///   the sum would exceed.
-/// * for a scene of at most [`COARSE_LIGHTS_MAX`] lights (one coarse sum)
-///   wherever the point lies, under the same conditions: the cut would
-///   first bound the root, and setting it up costs more than the sum. No
-///   node is counted then.
+/// by side, see [`Cut::sums_whole_scene`]) when the shading point lies in
+/// the root's ball, which has then no bound: the cut would count the root,
+/// find it unbounded and sum the whole scene. This is that sum, without
+/// setting up the cut, so the same bits and counts; `None` wherever the
+/// cut would take another step first (a dark root, a plane at or below the
+/// horizon, a single light, a bounded root, interpolation, a target for
+/// which lights are not summed coarsely, a budget the sum would exceed),
+/// and the caller runs the cut. (Summing a scene of a few lights wherever
+/// the point lies would cost less than bounding its root, but then a host
+/// that answers "visible" at the root would no longer get the bits of the
+/// unoccluded cut.)
 #[inline(always)]
 pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
     tree: &LightTree,
@@ -979,17 +976,14 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
     };
     let budget = threshold.budget().unwrap_or(u32::MAX).max(1);
     let lights = root.light_count;
-    // One coarse sum whatever the point, else only where the root has no
-    // bound (and is counted, as the cut counts it).
-    let nodes: u32 = if count <= COARSE_LIGHTS_MAX { 0 } else { 1 };
     if !V::ALWAYS_VISIBLE
         || lanes.is_empty()
         || lights > SMALL_SCENE_LIGHTS_COARSE
-        || nodes.saturating_add(lights) > budget
+        || 1u32.saturating_add(lights) > budget
         || root.intensity == DVec3::ZERO
         || root.radius == 0.0
         || tree.node_plane(0).is_some()
-        || (nodes == 1 && root.cone(surface.point).is_some())
+        || root.cone(surface.point).is_some()
     {
         return None;
     }
@@ -1010,7 +1004,7 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
     Some(ShadeResult {
         radiance: settled.value() + DVec3::ZERO,
         error_bound: reported_bound(DVec3::ZERO + settled_error),
-        nodes_evaluated: nodes,
+        nodes_evaluated: 1,
         lights_evaluated: lights,
         classify_queries: 0,
         point_queries: 0,
