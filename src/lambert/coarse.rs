@@ -406,8 +406,9 @@ pub(crate) fn sum_avx2(
 }
 
 /// [`sum_baseline`] of the `count` lights that `lanes` hold side by side
-/// (light `i` in lane `i % 8` of `lanes[i / 8]`): the same lights in the
-/// same lanes, so the same bits.
+/// (light `i` in lane `i % 8` of `lanes[i / 8]`), `None` for more than
+/// [`COARSE_MAX`] or more than the lanes hold: the same lights in the same
+/// lanes, so the same bits.
 pub(crate) fn sum_lanes_baseline(
     kd: DVec3,
     surface: &Surface,
@@ -417,22 +418,15 @@ pub(crate) fn sum_lanes_baseline(
     if count > COARSE_MAX || count > lanes.len() * LANES {
         return None;
     }
-    let frame = Frame::new(surface)?;
-    let mut sums = Sums {
-        rgb: [[0.0; LANES]; 3],
-        envelope: [0.0; LANES],
-        in_range: true,
-        any: false,
-    };
-    for i in 0..count {
+    let mut lights = [PointLight::default(); COARSE_MAX];
+    for (i, light) in lights[..count].iter_mut().enumerate() {
         let (group, k) = (&lanes[i / LANES], i % LANES);
-        let light = PointLight::new(
+        *light = PointLight::new(
             Vec3::new(group.x[k], group.y[k], group.z[k]),
             Vec3::new(group.red[k], group.green[k], group.blue[k]),
         );
-        frame.add(&light, k, &mut sums);
     }
-    Frame::total(&sums, kd, count)
+    sum_baseline(kd, surface, &lights[..count])
 }
 
 /// [`sum_lanes_baseline`] with AVX2 instructions ([`Sums8`]): each

@@ -48,12 +48,11 @@ pub use threshold::{Target, Threshold};
 pub struct Shading<'t, S: Shader> {
     tree: &'t LightTree,
     shader: S,
-    /// Whether the tree is a small scene, summed rather than cut where its
-    /// lights are known visible.
-    small_scene: bool,
-    /// A small scene's lights side by side, for the shader's
-    /// [`sum_lanes_coarse`](Shader::sum_lanes_coarse); empty otherwise.
-    small_lanes: Vec<LightLanes>,
+    /// For a small scene, summed rather than cut where its lights are known
+    /// visible, its lights side by side for the shader's
+    /// [`sum_lanes_coarse`](Shader::sum_lanes_coarse); `None` for other
+    /// trees.
+    small_lanes: Option<Vec<LightLanes>>,
     scratch: Scratch,
 }
 
@@ -76,16 +75,10 @@ impl LightTree {
     /// [`shade_query`](Shading::shade_query)).
     #[must_use]
     pub fn shading<S: Shader>(&self, shader: S) -> Shading<'_, S> {
-        let small_scene = self.is_small_scene();
         Shading {
             tree: self,
             shader,
-            small_scene,
-            small_lanes: if small_scene {
-                LightLanes::of(&self.lights)
-            } else {
-                Vec::new()
-            },
+            small_lanes: self.is_small_scene().then(|| LightLanes::of(&self.lights)),
             scratch: Scratch::default(),
         }
     }
@@ -199,11 +192,11 @@ impl<'t, S: Shader> Shading<'t, S> {
         threshold: Threshold,
         visibility: V,
     ) -> ShadeResult {
-        if self.small_scene
+        if let Some(lanes) = &self.small_lanes
             && let Some(result) = refine::shade_small_scene::<S, V>(
                 self.tree,
                 &self.shader,
-                &self.small_lanes,
+                lanes,
                 surface,
                 &threshold,
             )
@@ -217,7 +210,7 @@ impl<'t, S: Shader> Shading<'t, S> {
             point,
             &threshold,
             visibility,
-            self.small_scene.then_some(&self.small_lanes[..]),
+            self.small_lanes.as_deref(),
         );
         let list = &mut self.scratch.list;
         let nesting = &mut self.scratch.nesting;
@@ -358,8 +351,9 @@ mod tests {
             let lambert = Lambert::new(Vec3::new(0.8, 0.6, 0.4));
             let mut with = tree.shading(lambert);
             let mut without = tree.shading(lambert);
-            assert!(with.small_scene && !with.small_lanes.is_empty());
-            without.small_lanes.clear();
+            assert!(with.small_lanes.as_ref().is_some_and(|l| !l.is_empty()));
+            // Still a small scene, its lights summed from their records.
+            without.small_lanes = Some(Vec::new());
             for k in 0..40 {
                 let far = if k % 4 == 3 { 400.0 } else { 1.0 };
                 let point = Vec3::new(uniform() * 40.0, uniform() * 40.0, 0.0) * far;
@@ -378,7 +372,7 @@ mod tests {
                 let summed = super::refine::shade_small_scene::<_, Unoccluded>(
                     &tree,
                     &lambert,
-                    &with.small_lanes,
+                    with.small_lanes.as_deref().unwrap(),
                     query.surface(),
                     &threshold,
                 );

@@ -37,12 +37,10 @@ pub(crate) struct Cut<'a, S: Shader, V> {
     /// sum (a target of 0, see [`Threshold::exact`]) rather than a few at a
     /// time ([`Shader::sum_lights`]).
     one_by_one: bool,
-    /// Whether the tree is a small scene, summed light by light rather than
-    /// cut (see [`Cut::sums_whole_scene`]).
-    small_scene: bool,
-    /// A small scene's lights side by side (empty otherwise), for the
-    /// shader's [`Shader::sum_lanes_coarse`].
-    small_lanes: &'a [LightLanes],
+    /// For a small scene, summed light by light rather than cut (see
+    /// [`Cut::sums_whole_scene`]), its lights side by side for the shader's
+    /// [`Shader::sum_lanes_coarse`]; `None` for other trees.
+    small_lanes: Option<&'a [LightLanes]>,
     pub(crate) visibility: V,
     /// Exact leaves and nodes that need no refinement.
     pub(crate) settled: CompensatedSum,
@@ -114,21 +112,11 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 NEAR_NODE_LIGHTS
             },
             one_by_one: threshold.is_exact(),
-            small_scene: small_lanes.is_some(),
-            small_lanes: small_lanes.unwrap_or_default(),
+            small_lanes,
             visibility,
             settled: CompensatedSum::default(),
             settled_error: DVec3::ZERO,
-            coarse: match threshold.target() {
-                Target::Relative(t)
-                    if threshold.interpolation().is_none()
-                        && t >= COARSE_TARGET_MIN
-                        && t.is_finite() =>
-                {
-                    Some(t / 32.0)
-                }
-                _ => None,
-            },
+            coarse: coarse_share(threshold),
             nodes: 0,
             lights: 0,
             classify_queries: 0,
@@ -553,7 +541,7 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         } else {
             SMALL_SCENE_LIGHTS
         };
-        self.small_scene
+        self.small_lanes.is_some()
             && self.tree.nodes[0].light_count <= most
             && self.exact_lights > 0
             && !self.one_by_one
@@ -590,15 +578,19 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         if seen == Seen::Visible && !self.one_by_one {
             self.lights += range.len() as u32;
             if let Some(share) = self.coarse {
-                if range.start == 0
-                    && range.end == tree.lights.len()
-                    && !self.small_lanes.is_empty()
+                if let Some(lanes) = self.small_lanes
+                    && !lanes.is_empty()
+                    && range == (0..tree.lights.len())
                 {
                     // The whole of a small scene: its lights side by side.
-                    let groups = self.small_lanes.chunks(COARSE_LIGHTS_MAX / 8);
-                    for (lights, lanes) in tree.lights.chunks(COARSE_LIGHTS_MAX).zip(groups) {
-                        self.sum_lanes_coarse(lights, lanes, share, weight);
-                    }
+                    settle_small_scene(
+                        self.shader,
+                        &self.per_point,
+                        self.surface,
+                        (&tree.lights, lanes),
+                        (share, weight),
+                        (&mut self.settled, &mut self.settled_error),
+                    );
                     return;
                 }
                 for lights in tree.lights[range].chunks(COARSE_LIGHTS_MAX) {
@@ -730,37 +722,20 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
         }
     }
 
-    /// [`sum_seen_coarse`](Self::sum_seen_coarse) of `lights`, which
-    /// `lanes` hold side by side (see [`settle_lanes`]).
-    #[inline(always)]
-    fn sum_lanes_coarse(
-        &mut self,
-        lights: &[PointLight],
-        lanes: &[LightLanes],
-        share: f64,
-        weight: f64,
-    ) {
-        settle_lanes(
-            self.shader,
-            &self.per_point,
-            self.surface,
-            (lights, lanes),
-            (share, weight),
-            (&mut self.settled, &mut self.settled_error),
-        );
-    }
-
     /// The sum of `lights`, known visible, times `weight`, settled: a
     /// chunk at a time, each chunk a plain sum of non-negative terms (see
     /// [`Shader::sum_lights`]). The caller counts the lights.
     #[inline(always)]
     fn sum_visible(&mut self, lights: &[PointLight], weight: f64) {
-        for lights in lights.chunks(SUM_LIGHTS_MAX) {
-            let sum = self
-                .shader
-                .sum_lights(&self.per_point, self.surface, lights);
-            self.settled.add(sum * weight);
-        }
+        let (shader, per_point, surface) = (self.shader, &self.per_point, self.surface);
+        settle_visible(
+            shader,
+            per_point,
+            surface,
+            lights,
+            weight,
+            &mut self.settled,
+        );
     }
 
     /// Refines node `index`: its lights exactly if it is a leaf, its
@@ -913,14 +888,46 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     }
 }
 
-/// The sum of `lights` (at most [`COARSE_LIGHTS_MAX`]), visible, which
-/// `lanes` hold side by side, times `weight`, settled into `settled` and
-/// its error into `error`: the shader's [`Shader::sum_lanes_coarse`] where
-/// it has one, else its [`Shader::sum_lights_coarse`], kept where the
-/// sum's error is at most `share` of it channel by channel; else a plain
-/// sum a chunk at a time, as [`Cut::sum_visible`].
+/// The share of its sum a coarse sum's error may be for the sum to be kept
+/// (`1/32` of a relative target of at least [`COARSE_TARGET_MIN`], without
+/// interpolation), or `None` where the cut does not sum coarsely.
 #[inline(always)]
-fn settle_lanes<S: Shader>(
+fn coarse_share(threshold: &Threshold) -> Option<f64> {
+    match threshold.target() {
+        Target::Relative(t)
+            if threshold.interpolation().is_none() && t >= COARSE_TARGET_MIN && t.is_finite() =>
+        {
+            Some(t / 32.0)
+        }
+        _ => None,
+    }
+}
+
+/// [`Cut::sum_visible`]: the plain sum of `lights`, known visible, times
+/// `weight`, into `settled`, a chunk of [`SUM_LIGHTS_MAX`] at a time.
+#[inline(always)]
+fn settle_visible<S: Shader>(
+    shader: &S,
+    per_point: &S::PerPoint,
+    surface: &Surface,
+    lights: &[PointLight],
+    weight: f64,
+    settled: &mut CompensatedSum,
+) {
+    for lights in lights.chunks(SUM_LIGHTS_MAX) {
+        settled.add(shader.sum_lights(per_point, surface, lights) * weight);
+    }
+}
+
+/// The sum of a whole small scene, `lights` and the same lights side by
+/// side in `lanes`, visible, times `weight`, settled into `settled` and its
+/// error into `error_sum`, [`COARSE_LIGHTS_MAX`] lights at a time: the
+/// shader's [`Shader::sum_lanes_coarse`] where it has one, else its
+/// [`Shader::sum_lights_coarse`], kept where the sum's error is at most
+/// `share` of it channel by channel (as [`Cut::sum_seen_coarse`]); else
+/// [`settle_visible`].
+#[inline(always)]
+fn settle_small_scene<S: Shader>(
     shader: &S,
     per_point: &S::PerPoint,
     surface: &Surface,
@@ -928,18 +935,17 @@ fn settle_lanes<S: Shader>(
     (share, weight): (f64, f64),
     (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
 ) {
-    let sum = shader
-        .sum_lanes_coarse(per_point, surface, lanes, lights.len())
-        .or_else(|| shader.sum_lights_coarse(per_point, surface, lights));
-    match sum {
-        Some((sum, error)) if error.cmple(sum * share).all() => {
-            settled.add(sum * weight);
-            *error_sum += error * weight;
-        }
-        _ => {
-            for lights in lights.chunks(SUM_LIGHTS_MAX) {
-                settled.add(shader.sum_lights(per_point, surface, lights) * weight);
+    let groups = lanes.chunks(COARSE_LIGHTS_MAX / 8);
+    for (lights, lanes) in lights.chunks(COARSE_LIGHTS_MAX).zip(groups) {
+        let sum = shader
+            .sum_lanes_coarse(per_point, surface, lanes, lights.len())
+            .or_else(|| shader.sum_lights_coarse(per_point, surface, lights));
+        match sum {
+            Some((sum, error)) if error.cmple(sum * share).all() => {
+                settled.add(sum * weight);
+                *error_sum += error * weight;
             }
+            _ => settle_visible(shader, per_point, surface, lights, weight, settled),
         }
     }
 }
@@ -965,15 +971,7 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
     threshold: &Threshold,
 ) -> Option<ShadeResult> {
     let root = tree.nodes.first()?;
-    let count = tree.lights.len();
-    let share = match threshold.target() {
-        Target::Relative(t)
-            if threshold.interpolation().is_none() && t >= COARSE_TARGET_MIN && t.is_finite() =>
-        {
-            t / 32.0
-        }
-        _ => return None,
-    };
+    let share = coarse_share(threshold)?;
     let budget = threshold.budget().unwrap_or(u32::MAX).max(1);
     let lights = root.light_count;
     if !V::ALWAYS_VISIBLE
@@ -989,17 +987,14 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
     }
     let per_point = shader.prepare(surface);
     let (mut settled, mut settled_error) = (CompensatedSum::default(), DVec3::ZERO);
-    let groups = lanes.chunks(COARSE_LIGHTS_MAX / 8);
-    for (lights, lanes) in tree.lights[..count].chunks(COARSE_LIGHTS_MAX).zip(groups) {
-        settle_lanes(
-            shader,
-            &per_point,
-            surface,
-            (lights, lanes),
-            (share, 1.0),
-            (&mut settled, &mut settled_error),
-        );
-    }
+    settle_small_scene(
+        shader,
+        &per_point,
+        surface,
+        (&tree.lights, lanes),
+        (share, 1.0),
+        (&mut settled, &mut settled_error),
+    );
     // As the cut's end with an empty error list: its sums are +0.
     Some(ShadeResult {
         radiance: settled.value() + DVec3::ZERO,
