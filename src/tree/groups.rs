@@ -166,16 +166,6 @@ macro_rules! with_block {
 }
 pub(crate) use with_block;
 
-impl Group<'_> {
-    /// The block's address range.
-    #[inline(always)]
-    pub(crate) fn bytes(&self) -> core::ops::Range<usize> {
-        let (start, len) =
-            with_block!(self, b => (core::ptr::from_ref(*b) as usize, size_of_val(*b)));
-        start..start + len
-    }
-}
-
 impl<const N: usize, const R: usize, const M: usize> Block<N, R, M> {
     /// The block of `children` (at most `N`, at least one), whose colour
     /// spreads are `spreads` (read by one-colour blocks only).

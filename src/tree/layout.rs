@@ -351,10 +351,11 @@ impl LightTree {
             // (see `Node`'s layout); their statistics come from the block.
             for child in self.nodes.get(node.children()).unwrap_or(&[]) {
                 let start = core::ptr::from_ref(child) as usize;
-                prefetch(start..start + HOT_NODE_BYTES);
+                prefetch_line(start);
+                prefetch_line(start + HOT_NODE_BYTES - 1);
             }
             if let Some(group) = self.groups.children(index) {
-                prefetch(group.bytes());
+                super::groups::with_block!(group, block => prefetch_value(block));
             }
         }
     }
@@ -388,22 +389,40 @@ const PREFETCH_LINES: usize = 16;
 /// reads no memory the program can observe and never faults.
 #[inline]
 pub(super) fn prefetch(range: core::ops::Range<usize>) {
+    let mut line = range.start & !63;
+    let end = range.end.min(range.start + PREFETCH_LINES * 64);
+    while line < end {
+        prefetch_line(line);
+        line += 64;
+    }
+}
+
+/// Prefetches the cache lines of `value`, as [`prefetch`] its range: as
+/// many lines as a value of its size can touch wherever it starts (at most
+/// [`PREFETCH_LINES`]), a number known when compiling, so that the loop
+/// unrolls.
+#[inline(always)]
+fn prefetch_value<T>(value: &T) {
+    let start = core::ptr::from_ref(value) as usize & !63;
+    let lines = (size_of::<T>() + 126) / 64;
+    for k in 0..lines.min(PREFETCH_LINES) {
+        prefetch_line(start + 64 * k);
+    }
+}
+
+/// Prefetches the cache line holding `address` into every cache level.
+#[inline(always)]
+fn prefetch_line(address: usize) {
     #[cfg(target_arch = "x86_64")]
     {
         use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        let mut line = range.start & !63;
-        let end = range.end.min(range.start + PREFETCH_LINES * 64);
-        while line < end {
-            // SAFETY: `prefetch` is a hint that never dereferences the
-            // address architecturally and cannot fault; every address here
-            // lies inside a live slice anyway.
-            #[allow(unsafe_code)]
-            unsafe {
-                _mm_prefetch::<_MM_HINT_T0>(line as *const i8);
-            }
-            line += 64;
+        // SAFETY: a prefetch is a hint that never dereferences the address
+        // architecturally and cannot fault, whatever the address.
+        #[allow(unsafe_code)]
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(address as *const i8);
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = range;
+    let _ = address;
 }
