@@ -126,6 +126,11 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// in the session), for the shader's
     /// [`Shader::sum_lanes_coarse`]; when the point lies in the root's ball
     /// it is summed at once, without setting up the cut (the same result).
+    /// So is a scene of at most 64 lights wherever the point lies, and
+    /// whether or not its root's bound would meet the threshold (one coarse
+    /// sum costs less than bounding the root); a host's cut that is told
+    /// the root is visible then sums it the same way, with the same
+    /// result.
     ///
     /// `visibility` is the host's ray tracer ([`Visibility`]); pass
     /// [`Unoccluded`] for none, or `&mut host` to keep the host.
@@ -326,16 +331,33 @@ mod tests {
         )
     }
 
+    /// A host that sees every light, answering "visible" for every node.
+    struct Clear;
+
+    impl crate::Visibility for Clear {
+        fn classify(&mut self, _: Vec3, _: &crate::NodeRegion) -> crate::Coverage {
+            crate::Coverage::Visible
+        }
+
+        fn visible(&mut self, _: Vec3, _: Vec3) -> bool {
+            true
+        }
+    }
+
     /// A small scene summed from its lights side by side, without setting
     /// up the cut, gives the bits and counts of the cut over the same tree
     /// without them (which sums the lights one record at a time): scenes
     /// of 2 to 768 lights, points inside and outside the root's ball, and
     /// thresholds with and without coarse sums, budgets and interpolation.
+    /// A scene of at most 64 lights is summed wherever the point lies:
+    /// outside the root's ball that sum is within its bound of the exact
+    /// sum and meets the target, the root is counted, and a host that
+    /// answers "visible" at the root gets the same bits.
     #[test]
     fn small_scenes_summed_side_by_side_match_the_cut() {
         let mut state = 37u64;
         let mut uniform = move || crate::testing::uniform(&mut state);
-        let mut fast = 0;
+        let (mut fast, mut tiny, mut asked) = (0, 0, 0);
         for (round, count) in [2usize, 7, 8, 9, 64, 65, 100, 300, 512, 767, 768]
             .into_iter()
             .enumerate()
@@ -377,9 +399,42 @@ mod tests {
                     &threshold,
                 );
                 fast += usize::from(summed.is_some());
-                assert_eq!(bits(&a), bits(&b), "{count} lights, point {k}");
+                if let Some(summed) = &summed
+                    && tree.nodes[0].cone(query.surface().point).is_some()
+                {
+                    // Where the cut would bound the root first.
+                    tiny += 1;
+                    assert!(count <= 64, "{count} lights summed outside the root's ball");
+                    assert_eq!(bits(&a), bits(summed));
+                    assert_eq!((a.nodes_evaluated, a.lights_evaluated), (1, count as u32));
+                    let exact = with.exact_query(&query, Unoccluded);
+                    assert!(a.certifies(exact), "{a:?} against {exact}");
+                    assert!(threshold.met(a.radiance, a.error_bound, 0.0));
+                    // A host asked about the root (once) changes nothing
+                    // else; one is not asked where the root's interval
+                    // before its answer, `[0, upper]`, meets the target.
+                    let host = with.shade_query(&query, threshold, Clear).unwrap();
+                    assert!(host.classify_queries <= 1);
+                    if host.classify_queries == 1 {
+                        asked += 1;
+                        let host = ShadeResult {
+                            classify_queries: 0,
+                            ..host
+                        };
+                        assert_eq!(bits(&host), bits(&a), "{count} lights, point {k}");
+                    } else {
+                        assert!(host.certifies(exact));
+                        assert!(threshold.met(host.radiance, host.error_bound, 0.0));
+                    }
+                } else {
+                    assert_eq!(bits(&a), bits(&b), "{count} lights, point {k}");
+                }
             }
         }
         assert!(fast > 60 && fast < 400, "{fast} sums without the cut");
+        assert!(
+            tiny > 10 && asked > 5,
+            "{tiny} sums outside the root's ball, {asked} asked"
+        );
     }
 }

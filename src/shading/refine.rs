@@ -341,6 +341,12 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             }
             Coverage::Visible => {
                 self.decisive_answers += 1;
+                if top.node == 0 && self.sums_tiny_scene() {
+                    // As `shade_small_scene` does without a host, wherever
+                    // the point lies; the root's entry drops out.
+                    self.sum_lights(node.lights(), Seen::Visible, 1.0);
+                    return None;
+                }
                 Seen::Visible
             }
             Coverage::Partial => {
@@ -546,6 +552,24 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
             && self.exact_lights > 0
             && !self.one_by_one
             && self.cost().saturating_add(self.tree.nodes[0].light_count) <= self.budget
+    }
+
+    /// Whether the whole scene is summed once its root is known visible,
+    /// however near the point, and whether or not the root's interval
+    /// already meets the threshold: a scene of at most
+    /// [`COARSE_LIGHTS_MAX`] lights (one coarse sum) that
+    /// [`sums_whole_scene`](Self::sums_whole_scene), summed coarsely from
+    /// its lights side by side, with no plane recorded at the root. These
+    /// are the conditions under which [`shade_small_scene`] sums such a
+    /// scene without a host, so that a host answering "visible" at the
+    /// root gets the same bits.
+    #[inline(always)]
+    fn sums_tiny_scene(&self) -> bool {
+        self.coarse.is_some()
+            && self.small_lanes.is_some_and(|lanes| !lanes.is_empty())
+            && self.tree.nodes[0].light_count as usize <= COARSE_LIGHTS_MAX
+            && self.tree.node_plane(0).is_none()
+            && self.sums_whole_scene()
     }
 
     /// Whether a visible node is summed light by light when it enters the
@@ -951,17 +975,22 @@ fn settle_small_scene<S: Shader>(
 }
 
 /// The cut of a small scene whose lights are known visible (`lanes` side
-/// by side, see [`Cut::sums_whole_scene`]) when the shading point lies in
-/// the root's ball, which has then no bound: the cut would count the root,
-/// find it unbounded and sum the whole scene. This is that sum, without
-/// setting up the cut, so the same bits and counts; `None` wherever the
-/// cut would take another step first (a dark root, a plane at or below the
-/// horizon, a single light, a bounded root, interpolation, a target for
-/// which lights are not summed coarsely, a budget the sum would exceed),
-/// and the caller runs the cut. (Summing a scene of a few lights wherever
-/// the point lies would cost less than bounding its root, but then a host
-/// that answers "visible" at the root would no longer get the bits of the
-/// unoccluded cut.)
+/// by side, see [`Cut::sums_whole_scene`]), summed without setting up the
+/// cut, or `None` where the caller runs the cut:
+///
+/// * when the shading point lies in the root's ball, which has then no
+///   bound: the cut would count the root, find it unbounded and sum the
+///   whole scene. This is that sum, so the same bits and counts.
+/// * for a scene of at most [`COARSE_LIGHTS_MAX`] lights (one coarse
+///   sum), wherever the point lies: where the cut would bound the root
+///   first, setting it up costs more than the sum. The root is counted as
+///   evaluated, and a host's cut that is told the root is visible sums the
+///   scene the same way ([`Cut::sums_tiny_scene`]), so that it gets these
+///   bits.
+///
+/// Not where the cut would take another step first: a dark root, a plane
+/// recorded at the root, a single light, interpolation, a target for which
+/// lights are not summed coarsely, a budget the sum would exceed.
 #[inline(always)]
 pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
     tree: &LightTree,
@@ -981,7 +1010,7 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
         || root.intensity == DVec3::ZERO
         || root.radius == 0.0
         || tree.node_plane(0).is_some()
-        || root.cone(surface.point).is_some()
+        || (lights as usize > COARSE_LIGHTS_MAX && root.cone(surface.point).is_some())
     {
         return None;
     }
