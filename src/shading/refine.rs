@@ -555,20 +555,18 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
     }
 
     /// Whether the whole scene is summed once its root is known visible,
-    /// however near the point, and whether or not the root's interval
-    /// already meets the threshold: a scene of at most
-    /// [`COARSE_LIGHTS_MAX`] lights (one coarse sum) that
-    /// [`sums_whole_scene`](Self::sums_whole_scene), summed coarsely from
-    /// its lights side by side, with no plane recorded at the root. These
-    /// are the conditions under which [`shade_small_scene`] sums such a
-    /// scene without a host, so that a host answering "visible" at the
-    /// root gets the same bits.
+    /// however far the point, and whether or not the root's interval
+    /// already meets the threshold: a [`tiny_scene`], summed coarsely,
+    /// that [`sums_whole_scene`](Self::sums_whole_scene). These are the
+    /// conditions under which [`shade_small_scene`] sums such a scene
+    /// without a host, so that a host answering "visible" at the root gets
+    /// the same bits.
     #[inline(always)]
     fn sums_tiny_scene(&self) -> bool {
         self.coarse.is_some()
-            && self.small_lanes.is_some_and(|lanes| !lanes.is_empty())
-            && self.tree.nodes[0].light_count as usize <= COARSE_LIGHTS_MAX
-            && self.tree.node_plane(0).is_none()
+            && self
+                .small_lanes
+                .is_some_and(|lanes| tiny_scene(self.tree, lanes))
             && self.sums_whole_scene()
     }
 
@@ -974,6 +972,21 @@ fn settle_small_scene<S: Shader>(
     }
 }
 
+/// Whether a small scene (its lights side by side in `lanes`) is summed
+/// whole wherever the point lies, once known visible: at most
+/// [`COARSE_LIGHTS_MAX`] lights (one coarse sum, which costs less than
+/// bounding the root), and no plane recorded at the root. The one rule for
+/// [`shade_small_scene`] and [`Cut::sums_tiny_scene`].
+#[inline(always)]
+fn tiny_scene(tree: &LightTree, lanes: &[LightLanes]) -> bool {
+    !lanes.is_empty()
+        && tree
+            .nodes
+            .first()
+            .is_some_and(|root| root.light_count as usize <= COARSE_LIGHTS_MAX)
+        && tree.node_plane(0).is_none()
+}
+
 /// The cut of a small scene whose lights are known visible (`lanes` side
 /// by side, see [`Cut::sums_whole_scene`]), summed without setting up the
 /// cut, or `None` where the caller runs the cut:
@@ -1010,7 +1023,7 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
         || root.intensity == DVec3::ZERO
         || root.radius == 0.0
         || tree.node_plane(0).is_some()
-        || (lights as usize > COARSE_LIGHTS_MAX && root.cone(surface.point).is_some())
+        || (!tiny_scene(tree, lanes) && root.cone(surface.point).is_some())
     {
         return None;
     }
