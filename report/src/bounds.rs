@@ -111,19 +111,35 @@ pub fn print_bounds_table() -> Result<(), Box<dyn Error>> {
 
 /// Sizes of the build table.
 const BUILD_SIZES: [usize; 4] = [10_000, 100_000, 1_000_000, 10_000_000];
-/// Builds of each kind per size in the build table, alternating.
-const BUILD_ROUNDS: usize = 3;
+/// Builds of each kind per size in the build table, alternating: the
+/// medians of five are steadier than of three on a shared machine.
+const BUILD_ROUNDS: usize = 5;
+/// Sizes above this take [`BUILD_ROUNDS_LARGE`] rounds (a build of 10^7
+/// lights takes seconds).
+const BUILD_ROUNDS_LARGE_ABOVE: usize = 1_000_000;
+/// Rounds of the largest sizes.
+const BUILD_ROUNDS_LARGE: usize = 3;
 
 /// The build table: per size, the first build in the process (from the
 /// bounds table above, up to 10^6 lights), then the median of
-/// [`BUILD_ROUNDS`] builds on one thread alternating with as many on
-/// rayon's pool (`build_parallel`, the same tree) and as many rebuilds on
+/// [`BUILD_ROUNDS`] builds on one thread ([`BUILD_ROUNDS_LARGE`] above
+/// 10^6 lights) alternating with as many on rayon's pool
+/// (`build_parallel`, the same tree; not timed when the pool has one
+/// thread) and as many rebuilds on
 /// one thread of a tree of the same lights in the memory it holds
 /// (`rebuild`, the same tree again), the memory and the nodes per light.
 fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
+    // With one thread in rayon's pool (a process pinned to one core) the
+    // pool's builds are those of one thread again: not timed.
     let threads = rayon::current_num_threads();
+    let pooled = threads > 1;
+    let pool_column = if pooled {
+        format!("build / light, {threads} threads | one / {threads} threads")
+    } else {
+        "build / light, pool (one thread here: not timed) | one / pool".to_string()
+    };
     println!(
-        "| lights | first build / light | build / light, one thread | build / light, {threads} threads | one / {threads} threads | rebuild in place / light, one thread | build / rebuild | memory / light (lights included) | nodes / light |"
+        "| lights | first build / light | build / light, one thread | {pool_column} | rebuild in place / light, one thread | build / rebuild | memory / light (lights included) | nodes / light |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
     for (k, count) in BUILD_SIZES.into_iter().enumerate() {
@@ -132,31 +148,42 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
         let mut size = (0, 0);
         // Rebuilt over and over, as a renderer would each frame.
         let mut kept = LightTree::build(&lights)?;
-        for _ in 0..BUILD_ROUNDS {
+        let rounds = if count > BUILD_ROUNDS_LARGE_ABOVE {
+            BUILD_ROUNDS_LARGE
+        } else {
+            BUILD_ROUNDS
+        };
+        for _ in 0..rounds {
             let start = Instant::now();
             let tree = LightTree::build(&lights)?;
             one.push(start.elapsed().as_secs_f64());
             size = (tree.memory_bytes(), tree.nodes().len());
             drop(tree);
-            let start = Instant::now();
-            let tree = LightTree::build_parallel(&lights)?;
-            pool.push(start.elapsed().as_secs_f64());
-            drop(tree);
+            if pooled {
+                let start = Instant::now();
+                let tree = LightTree::build_parallel(&lights)?;
+                pool.push(start.elapsed().as_secs_f64());
+                drop(tree);
+            }
             let start = Instant::now();
             kept.rebuild(&lights)?;
             again.push(start.elapsed().as_secs_f64());
         }
         drop(kept);
-        let (one, pool, again) = (median(one), median(pool), median(again));
+        let (one, again) = (median(one), median(again));
         let per_light = |t: f64| t * 1e9 / count as f64;
         let first = first
             .get(k)
             .map_or("-".to_string(), |&t| format!("{:.0} ns", per_light(t)));
+        let pool = if pooled {
+            let pool = median(pool);
+            format!("{:.0} ns | {:.2}x", per_light(pool), one / pool)
+        } else {
+            "- | -".to_string()
+        };
         println!(
-            "| {count} | {first} | {:.0} ns | {:.0} ns | {:.2}x | {:.0} ns | {:.2}x | {:.0} B | {:.2} |",
+            "| {count} | {first} | {:.0} ns | {pool} | {:.0} ns | {:.2}x | {:.0} B | {:.2} |",
             per_light(one),
-            per_light(pool),
-            one / pool,
             per_light(again),
             one / again,
             size.0 as f64 / count as f64,

@@ -94,10 +94,17 @@ pub const SCALING_ABSOLUTE: f64 = 0.008;
 /// The relative sweep run at every size for the summary's speed-up.
 pub const SCALING_SWEEP: [f64; 4] = [0.3, 0.1, 0.03, 0.01];
 /// Builds of a tree of this many lights or fewer are repeated
-/// [`BUILD_REPEATS`] times (fastest kept); larger ones are timed once.
+/// [`BUILD_REPEATS`] times (the median kept); larger ones up to
+/// [`BUILD_REPEAT_FEWER_BELOW`] lights [`BUILD_REPEATS_FEWER`] times, and
+/// larger ones still are timed once.
 pub const BUILD_REPEAT_BELOW: usize = 100_000;
 /// Repeats of a small build.
 pub const BUILD_REPEATS: usize = 5;
+/// Builds of a tree of this many lights or fewer (and more than
+/// [`BUILD_REPEAT_BELOW`]) are repeated [`BUILD_REPEATS_FEWER`] times.
+pub const BUILD_REPEAT_FEWER_BELOW: usize = 1_000_000;
+/// Repeats of a large build.
+pub const BUILD_REPEATS_FEWER: usize = 3;
 
 /// Sizes and budgets of one run.
 #[derive(Clone, Copy, Debug)]

@@ -7,7 +7,10 @@ use std::time::Duration;
 
 use manylights::{BoundKind, Lambert, LightTree, Threshold, Unoccluded};
 
-use crate::config::{Config, SCALING_ABSOLUTE, SCALING_RELATIVE, SCALING_SWEEP, SEED};
+use crate::config::{
+    BUILD_REPEAT_BELOW, BUILD_REPEAT_FEWER_BELOW, BUILD_REPEATS, BUILD_REPEATS_FEWER, Config,
+    SCALING_ABSOLUTE, SCALING_RELATIVE, SCALING_SWEEP, SEED,
+};
 use crate::exact::SoaLights;
 use crate::measure::{Method, Paired, Record, Sample, paired};
 use crate::scenes::{self, Scene, ShadingPoint};
@@ -83,6 +86,11 @@ pub fn run_scaling(cfg: &Config) -> Result<Vec<ScalingRow>, Box<dyn Error>> {
     println!(
         "  thresholds: relative {SCALING_RELATIVE} (tight and paper's bound), absolute \
          {SCALING_ABSOLUTE} radiance units (tight)"
+    );
+    println!(
+        "  build times: one thread, the median of {BUILD_REPEATS} builds up to \
+         {BUILD_REPEAT_BELOW} lights, of {BUILD_REPEATS_FEWER} up to {BUILD_REPEAT_FEWER_BELOW}, \
+         one build above"
     );
     let unoccluded = None::<&dyn Fn(&ShadingPoint) -> Unoccluded>;
     let mut rows = Vec::new();

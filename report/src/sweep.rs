@@ -14,8 +14,8 @@ use manylights::{
 use rayon::prelude::*;
 
 use crate::config::{
-    BUILD_REPEAT_BELOW, BUILD_REPEATS, Config, PAPER_RELATIVE, PER_NODE, SAMPLE_COUNTS, SEED,
-    SOA_TOLERANCE, TREE_ABSOLUTE, TREE_RELATIVE,
+    BUILD_REPEAT_BELOW, BUILD_REPEAT_FEWER_BELOW, BUILD_REPEATS, BUILD_REPEATS_FEWER, Config,
+    PAPER_RELATIVE, PER_NODE, SAMPLE_COUNTS, SEED, SOA_TOLERANCE, TREE_ABSOLUTE, TREE_RELATIVE,
 };
 use crate::exact::SoaLights;
 use crate::measure::{self, Counted, Measurement, Method, Record, Sample, measure};
@@ -79,22 +79,30 @@ where
         .unzip()
 }
 
-/// Builds the tree, timing it (fastest of a few builds for small sets).
+/// Builds the tree, timing it: the median of a few builds up to 10^6
+/// lights (see [`BUILD_REPEATS`]), one build above.
 pub fn build_tree(scene: &Scene) -> Result<(LightTree, Duration), Box<dyn Error>> {
-    let repeats = if scene.lights.len() <= BUILD_REPEAT_BELOW {
+    let n = scene.lights.len();
+    let repeats = if n <= BUILD_REPEAT_BELOW {
         BUILD_REPEATS
+    } else if n <= BUILD_REPEAT_FEWER_BELOW {
+        BUILD_REPEATS_FEWER
     } else {
         1
     };
-    let mut fastest = Duration::MAX;
+    let mut times = Vec::with_capacity(repeats);
     let mut tree = None;
     for _ in 0..repeats {
+        // The previous tree is dropped first, so that each build finds the
+        // same free memory.
+        drop(tree.take());
         let t = Instant::now();
         let built = LightTree::build(&scene.lights)?;
-        fastest = fastest.min(t.elapsed());
+        times.push(t.elapsed().as_secs_f64());
         tree = Some(built);
     }
-    Ok((tree.expect("at least one build"), fastest))
+    let tree = tree.expect("at least one build");
+    Ok((tree, Duration::from_secs_f64(median(times))))
 }
 
 /// Checks the vectorized exact sum against the references; returns the
