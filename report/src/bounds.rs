@@ -17,7 +17,7 @@ use glam::Vec3;
 use manylights::{BoundKind, Lambert, LightTree, Node, PointLight, Threshold};
 use rand::RngExt;
 
-use crate::config::SEED;
+use crate::config::{SEED, build_repeats};
 use crate::exact::SoaLights;
 use crate::scenes::{city, rng};
 use crate::sweep::median;
@@ -111,19 +111,11 @@ pub fn print_bounds_table() -> Result<(), Box<dyn Error>> {
 
 /// Sizes of the build table.
 const BUILD_SIZES: [usize; 4] = [10_000, 100_000, 1_000_000, 10_000_000];
-/// Builds of each kind per size in the build table, alternating: the
-/// medians of five are steadier than of three on a shared machine.
-const BUILD_ROUNDS: usize = 5;
-/// Sizes above this take [`BUILD_ROUNDS_LARGE`] rounds (a build of 10^7
-/// lights takes seconds).
-const BUILD_ROUNDS_LARGE_ABOVE: usize = 1_000_000;
-/// Rounds of the largest sizes.
-const BUILD_ROUNDS_LARGE: usize = 3;
 
 /// The build table: per size, the first build in the process (from the
 /// bounds table above, up to 10^6 lights), then the median of
-/// [`BUILD_ROUNDS`] builds on one thread ([`BUILD_ROUNDS_LARGE`] above
-/// 10^6 lights) alternating with as many on rayon's pool
+/// [`build_repeats`] builds on one thread alternating with as many on
+/// rayon's pool
 /// (`build_parallel`, the same tree; not timed when the pool has one
 /// thread) and as many rebuilds on
 /// one thread of a tree of the same lights in the memory it holds
@@ -148,12 +140,7 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
         let mut size = (0, 0);
         // Rebuilt over and over, as a renderer would each frame.
         let mut kept = LightTree::build(&lights)?;
-        let rounds = if count > BUILD_ROUNDS_LARGE_ABOVE {
-            BUILD_ROUNDS_LARGE
-        } else {
-            BUILD_ROUNDS
-        };
-        for _ in 0..rounds {
+        for _ in 0..build_repeats(count) {
             let start = Instant::now();
             let tree = LightTree::build(&lights)?;
             one.push(start.elapsed().as_secs_f64());

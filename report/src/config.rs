@@ -93,18 +93,25 @@ pub const SCALING_RELATIVE: f64 = 0.01;
 pub const SCALING_ABSOLUTE: f64 = 0.008;
 /// The relative sweep run at every size for the summary's speed-up.
 pub const SCALING_SWEEP: [f64; 4] = [0.3, 0.1, 0.03, 0.01];
-/// Builds of a tree of this many lights or fewer are repeated
-/// [`BUILD_REPEATS`] times (the median kept); larger ones up to
-/// [`BUILD_REPEAT_FEWER_BELOW`] lights [`BUILD_REPEATS_FEWER`] times, and
-/// larger ones still are timed once.
-pub const BUILD_REPEAT_BELOW: usize = 100_000;
-/// Repeats of a small build.
+/// Trees of more lights than this are built [`BUILD_REPEATS_LARGE`] times
+/// when timed, smaller ones [`BUILD_REPEATS`] times (see
+/// [`build_repeats`]).
+pub const BUILD_LARGE_ABOVE: usize = 1_000_000;
+/// Timed builds of a tree of at most [`BUILD_LARGE_ABOVE`] lights: the
+/// median of five is steadier than of three on a shared machine.
 pub const BUILD_REPEATS: usize = 5;
-/// Builds of a tree of this many lights or fewer (and more than
-/// [`BUILD_REPEAT_BELOW`]) are repeated [`BUILD_REPEATS_FEWER`] times.
-pub const BUILD_REPEAT_FEWER_BELOW: usize = 1_000_000;
-/// Repeats of a large build.
-pub const BUILD_REPEATS_FEWER: usize = 3;
+/// Timed builds of a larger tree (a build of 10^7 lights takes seconds).
+pub const BUILD_REPEATS_LARGE: usize = 3;
+
+/// How many times a tree of `lights` lights is built when its build is
+/// timed (the median kept), by every part of the report.
+pub const fn build_repeats(lights: usize) -> usize {
+    if lights > BUILD_LARGE_ABOVE {
+        BUILD_REPEATS_LARGE
+    } else {
+        BUILD_REPEATS
+    }
+}
 
 /// Sizes and budgets of one run.
 #[derive(Clone, Copy, Debug)]

@@ -8,8 +8,8 @@ use std::time::Duration;
 use manylights::{BoundKind, Lambert, LightTree, Threshold, Unoccluded};
 
 use crate::config::{
-    BUILD_REPEAT_BELOW, BUILD_REPEAT_FEWER_BELOW, BUILD_REPEATS, BUILD_REPEATS_FEWER, Config,
-    SCALING_ABSOLUTE, SCALING_RELATIVE, SCALING_SWEEP, SEED,
+    BUILD_LARGE_ABOVE, BUILD_REPEATS, BUILD_REPEATS_LARGE, Config, SCALING_ABSOLUTE,
+    SCALING_RELATIVE, SCALING_SWEEP, SEED,
 };
 use crate::exact::SoaLights;
 use crate::measure::{Method, Paired, Record, Sample, paired};
@@ -88,9 +88,8 @@ pub fn run_scaling(cfg: &Config) -> Result<Vec<ScalingRow>, Box<dyn Error>> {
          {SCALING_ABSOLUTE} radiance units (tight)"
     );
     println!(
-        "  build times: one thread, the median of {BUILD_REPEATS} builds up to \
-         {BUILD_REPEAT_BELOW} lights, of {BUILD_REPEATS_FEWER} up to {BUILD_REPEAT_FEWER_BELOW}, \
-         one build above"
+        "  build times: one thread, the median of {BUILD_REPEATS} builds ({BUILD_REPEATS_LARGE} \
+         above {BUILD_LARGE_ABOVE} lights)"
     );
     let unoccluded = None::<&dyn Fn(&ShadingPoint) -> Unoccluded>;
     let mut rows = Vec::new();

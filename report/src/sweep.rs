@@ -14,8 +14,8 @@ use manylights::{
 use rayon::prelude::*;
 
 use crate::config::{
-    BUILD_REPEAT_BELOW, BUILD_REPEAT_FEWER_BELOW, BUILD_REPEATS, BUILD_REPEATS_FEWER, Config,
-    PAPER_RELATIVE, PER_NODE, SAMPLE_COUNTS, SEED, SOA_TOLERANCE, TREE_ABSOLUTE, TREE_RELATIVE,
+    Config, PAPER_RELATIVE, PER_NODE, SAMPLE_COUNTS, SEED, SOA_TOLERANCE, TREE_ABSOLUTE,
+    TREE_RELATIVE, build_repeats,
 };
 use crate::exact::SoaLights;
 use crate::measure::{self, Counted, Measurement, Method, Record, Sample, measure};
@@ -79,17 +79,9 @@ where
         .unzip()
 }
 
-/// Builds the tree, timing it: the median of a few builds up to 10^6
-/// lights (see [`BUILD_REPEATS`]), one build above.
+/// Builds the tree, timing it: the median of [`build_repeats`] builds.
 pub fn build_tree(scene: &Scene) -> Result<(LightTree, Duration), Box<dyn Error>> {
-    let n = scene.lights.len();
-    let repeats = if n <= BUILD_REPEAT_BELOW {
-        BUILD_REPEATS
-    } else if n <= BUILD_REPEAT_FEWER_BELOW {
-        BUILD_REPEATS_FEWER
-    } else {
-        1
-    };
+    let repeats = build_repeats(scene.lights.len());
     let mut times = Vec::with_capacity(repeats);
     let mut tree = None;
     for _ in 0..repeats {
