@@ -182,10 +182,12 @@ impl TreeBuilder {
     /// shifts its children's moments to its own centroid, with a certified
     /// bound on the rounding carried along (see
     /// [`Node::moment_error`](crate::Node::moment_error)). The radii stay
-    /// exact (the farthest member, rounded up): a node looks for its
-    /// farthest member through its subtree, skipping the subtrees that
-    /// its children's radii show cannot hold it, so that it reads the
-    /// lights of a few leaves rather than all of its own. Memory `O(n)`.
+    /// exact (the farthest member, rounded up): a leaf measures its lights'
+    /// distances from the offsets its moment sums take, and every other
+    /// node looks for its farthest member through its subtree, skipping the
+    /// subtrees that its children's radii show cannot hold it, so that it
+    /// reads the lights of a few leaves rather than all of its own. Memory
+    /// `O(n)`.
     ///
     /// # Errors
     /// [`BuildError`] for a light with a non-finite or out-of-range
@@ -1108,11 +1110,11 @@ macro_rules! fill_node_body {
             node.centroid = centroid.as_vec3().clamp(aabb.min, aabb.max);
             node.aabb = aabb;
         }
-        let radius_sq = farthest_member($levels, $lights, $depth, $index);
-        let node = $levels.node_mut($depth, $index);
-        node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
-        let (c, radius) = (node.centroid.as_dvec3(), node.radius);
-        match kids {
+        let c = $levels.node($depth, $index).centroid.as_dvec3();
+        // The largest squared distance from the centroid to a member: a
+        // leaf's from the offsets its moments take, any other node's
+        // through its subtree.
+        let radius_sq = match kids {
             None => $out.set_to_lights(&$lights[members], c, $scratch),
             Some(kids) => {
                 // The first child's shifted moments are written, the others'
@@ -1126,8 +1128,12 @@ macro_rules! fill_node_body {
                         kid.shift_into(t, $out);
                     }
                 }
+                farthest_member($levels, $lights, $depth, $index)
             }
-        }
+        };
+        let node = $levels.node_mut($depth, $index);
+        node.radius = round_up_f32(radius_sq.sqrt() * (1.0 + BUILD_LENGTH_SLACK));
+        let radius = node.radius;
         let stats = $out.statistics(intensity, radius, count as usize);
         store($levels.node_mut($depth, $index), stats);
         (weight, weighted, plain)
@@ -1189,7 +1195,8 @@ fn fill_node_avx2(
 /// of node `index` (`depth` levels below the subtree's root) to a member
 /// light: the same value as over all its lights, but subtrees that cannot
 /// hold a farther member are skipped. Its descendants' statistics are
-/// set.
+/// set. (The build takes a leaf's from the offsets its moments use, see
+/// [`Moments::set_to_lights`]: the same value.)
 ///
 /// A member `x` of a subtree with centroid `c'`, stored radius `r'` (at
 /// least its members' exact distances) and box `B` lies within `|c' - c| +

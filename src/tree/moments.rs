@@ -196,9 +196,11 @@ impl ChunkTerms {
     };
 
     /// Sets these to the terms of `chunk` (at most [`LIGHT_LANES`] lights)
-    /// about `centre`.
+    /// about `centre`; returns the largest of 0 and the lights' squared
+    /// distances from `centre`, each computed in `f64` as `(x - c) . (x -
+    /// c)` from the offsets the terms use.
     #[inline(always)]
-    fn set(&mut self, chunk: &[PointLight], centre: DVec3) {
+    fn set(&mut self, chunk: &[PointLight], centre: DVec3) -> f64 {
         let mut y = [[0.0; LIGHT_LANES]; 3];
         let mut intensity = [[0.0; LIGHT_LANES]; 3];
         for (k, l) in chunk.iter().enumerate() {
@@ -221,6 +223,14 @@ impl ChunkTerms {
         }
         self.values[NORMS..NORMS + DEGREE + 1].copy_from_slice(&scaled_power_lanes(&norm));
         self.intensity = intensity;
+        // The padded lanes' offsets are 0. A maximum is exact, so the
+        // lanes' order does not matter; no distance is NaN or -0.
+        let mut farthest = 0.0f64;
+        for k in 0..LIGHT_LANES {
+            let d2 = y[0][k] * y[0][k] + y[1][k] * y[1][k] + y[2][k] * y[2][k];
+            farthest = if d2 > farthest { d2 } else { farthest };
+        }
+        farthest
     }
 }
 
@@ -241,24 +251,26 @@ impl LeafScratch {
     }
 
     /// The terms of `lights` (at most [`BLOCK_CHUNKS`] chunks) about
-    /// `centre`, and room for the carried accumulators.
+    /// `centre`, room for the carried accumulators, and the lights' largest
+    /// squared distance from `centre` (see [`ChunkTerms::set`]).
     #[inline(always)]
     fn block(
         &mut self,
         lights: &[PointLight],
         centre: DVec3,
-    ) -> (&[ChunkTerms], &mut [Accumulator]) {
+    ) -> (&[ChunkTerms], &mut [Accumulator], f64) {
         let chunks = lights.len().div_ceil(LIGHT_LANES);
         if self.terms.len() < chunks {
             self.terms.resize(chunks, ChunkTerms::ZERO);
         }
+        let mut farthest = 0.0f64;
         for (terms, chunk) in self.terms.iter_mut().zip(lights.chunks(LIGHT_LANES)) {
-            terms.set(chunk, centre);
+            farthest = farthest.max(terms.set(chunk, centre));
         }
         if self.carry.len() < SUMS {
             self.carry.resize(SUMS, [[0.0; LIGHT_LANES]; 3]);
         }
-        (&self.terms[..chunks], &mut self.carry)
+        (&self.terms[..chunks], &mut self.carry, farthest)
     }
 }
 
@@ -410,7 +422,7 @@ impl Moments {
     #[cfg(test)]
     pub(crate) fn of_lights(lights: &[PointLight], centre: DVec3) -> Self {
         let mut out = Self::ZERO;
-        out.set_to_lights(lights, centre, &mut LeafScratch::new());
+        let _ = out.set_to_lights(lights, centre, &mut LeafScratch::new());
         out
     }
 
@@ -425,17 +437,24 @@ impl Moments {
     /// time over the block's chunks, their accumulators in registers
     /// rather than in memory. Each sum still takes its terms in the
     /// lights' order, so the order of the sums changes no bit.
+    ///
+    /// Returns the largest of 0 and the lights' squared distances from
+    /// `centre`, each computed in `f64` as `(x - c) . (x - c)` (a node's
+    /// radius, read off the offsets the terms use rather than in a pass of
+    /// its own).
     #[inline(always)]
     pub(crate) fn set_to_lights(
         &mut self,
         lights: &[PointLight],
         centre: DVec3,
         scratch: &mut LeafScratch,
-    ) {
+    ) -> f64 {
         const BLOCK: usize = BLOCK_CHUNKS * LIGHT_LANES;
         let blocks = lights.len().div_ceil(BLOCK);
+        let mut farthest = 0.0f64;
         for (k, block) in lights.chunks(BLOCK).enumerate() {
-            let (terms, carry) = scratch.block(block, centre);
+            let (terms, carry, far) = scratch.block(block, centre);
+            farthest = farthest.max(far);
             self.sum_block(terms, carry, k == 0, k + 1 == blocks);
         }
         if lights.is_empty() {
@@ -448,6 +467,7 @@ impl Moments {
                 *e = *a * slack;
             }
         }
+        farthest
     }
 
     /// Adds one block's chunks to the accumulators of the sums: from 0 if
