@@ -226,8 +226,8 @@ impl ChunkTerms {
         // The padded lanes' offsets are 0. A maximum is exact, so the
         // lanes' order does not matter; no distance is NaN or -0.
         let mut farthest = 0.0f64;
-        for k in 0..LIGHT_LANES {
-            let d2 = y[0][k] * y[0][k] + y[1][k] * y[1][k] + y[2][k] * y[2][k];
+        for ((x, y), z) in y[0].iter().zip(&y[1]).zip(&y[2]) {
+            let d2 = x * x + y * y + z * z;
             farthest = if d2 > farthest { d2 } else { farthest };
         }
         farthest
