@@ -1192,11 +1192,11 @@ fn fill_node_avx2(
 }
 
 /// The largest squared distance, as computed in `f64`, from the centroid
-/// of node `index` (`depth` levels below the subtree's root) to a member
-/// light: the same value as over all its lights, but subtrees that cannot
-/// hold a farther member are skipped. Its descendants' statistics are
-/// set. (The build takes a leaf's from the offsets its moments use, see
-/// [`Moments::set_to_lights`]: the same value.)
+/// of node `index` (`depth` levels below the subtree's root), which has
+/// children, to a member light: the same value as over all its lights, but
+/// subtrees that cannot hold a farther member are skipped. Its
+/// descendants' statistics are set. (A leaf's comes with its moments, see
+/// [`Moments::set_to_lights`]: the same value as over its lights here.)
 ///
 /// A member `x` of a subtree with centroid `c'`, stored radius `r'` (at
 /// least its members' exact distances) and box `B` lies within `|c' - c| +
@@ -1230,9 +1230,7 @@ fn farthest_member(levels: &Levels<'_>, lights: &[PointLight], depth: usize, ind
         }
         larger(larger(best[0], best[1]), larger(best[2], best[3]))
     };
-    if node.is_leaf() {
-        return squared(&lights[node.lights()]);
-    }
+    debug_assert!(!node.is_leaf(), "a leaf's radius comes with its moments");
     let mut best = 0.0f64;
     // Subtrees still to search (index and depth), with the bounds of their
     // members' squared distances.
