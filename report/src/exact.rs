@@ -11,6 +11,12 @@
 //! repeated squaring with the (integer, shared) exponent's bits, which
 //! vectorizes where `powf` would not. The result agrees with the crate's
 //! `f64` `exact_query` to about `1e-6` relative (checked by the report).
+//!
+//! Like the crate's own kernels, the sum has a copy compiled for AVX2
+//! (eight lanes in one vector), picked at run time where the processor has
+//! it, so that the yardstick gets the instructions the tree gets; it gives
+//! the same bits as the build's baseline copy (SSE2 in a default `x86_64`
+//! build), which [`SoaLights::baseline`] runs for comparison.
 
 use glam::{DVec3, Vec3};
 use manylights::PointLight;
@@ -36,6 +42,9 @@ struct Chunk {
 #[derive(Clone, Debug)]
 pub struct SoaLights {
     chunks: Vec<Chunk>,
+    /// Whether to run the build's baseline copy even where the processor
+    /// has AVX2 (see [`baseline`](Self::baseline)).
+    baseline: bool,
 }
 
 /// The shading point and material as the inner loop reads them.
@@ -60,7 +69,19 @@ impl SoaLights {
                 chunk.intensity[k][l] = light.intensity[k];
             }
         }
-        Self { chunks }
+        Self {
+            chunks,
+            baseline: false,
+        }
+    }
+
+    /// These lights summed by the copy compiled for the build's target
+    /// only (SSE2 in a default `x86_64` build), never the AVX2 copy: for
+    /// comparing the two.
+    #[must_use]
+    pub fn baseline(mut self) -> Self {
+        self.baseline = true;
+        self
     }
 
     /// The exact radiance at `point` (unit `normal`, unit `view`) for
@@ -86,7 +107,32 @@ impl SoaLights {
         }
     }
 
+    /// The sum over every chunk: the copy compiled for AVX2 where the
+    /// processor has it (picked at run time, as the crate picks its own
+    /// kernels), else the build's baseline. Neither fuses a multiply and
+    /// an add, so both give the same bits.
+    // Calling the AVX2 copy after the check is this module's one unsafe
+    // block.
+    #[allow(unsafe_code)]
     fn sum<const GLOSSY: bool>(&self, rx: &Receiver) -> DVec3 {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && !self.baseline {
+            // SAFETY: the processor has AVX2 (checked just above).
+            return unsafe { self.sum_avx2::<GLOSSY>(rx) };
+        }
+        self.sum_body::<GLOSSY>(rx)
+    }
+
+    /// [`sum_body`](Self::sum_body) compiled for AVX2: eight lanes in one
+    /// vector, three-operand instructions.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn sum_avx2<const GLOSSY: bool>(&self, rx: &Receiver) -> DVec3 {
+        self.sum_body::<GLOSSY>(rx)
+    }
+
+    #[inline(always)]
+    fn sum_body<const GLOSSY: bool>(&self, rx: &Receiver) -> DVec3 {
         let mut total = DVec3::ZERO;
         for block in self.chunks.chunks(FLUSH_CHUNKS) {
             let mut acc = [[0.0f32; LANES]; 3];
@@ -159,6 +205,52 @@ fn chunk<const GLOSSY: bool>(rx: &Receiver, lights: &Chunk, acc: &mut [Lanes; 3]
                 w += ks[k] * specular[l];
             }
             acc[k][l] += intensity[k][l] * w;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenes::{Specular, city};
+    use manylights::{Lambert, LightTree, Unoccluded};
+
+    /// The AVX2 copy and the baseline give the same bits, diffuse and
+    /// glossy, and the diffuse sums agree with the crate's `f64`
+    /// `exact_query`.
+    #[test]
+    fn both_copies_give_the_same_bits() {
+        let scene = city(3_000, 16, 7);
+        let fast = SoaLights::new(&scene.lights);
+        let base = SoaLights::new(&scene.lights).baseline();
+        let tree = LightTree::build(&scene.lights).expect("valid lights");
+        let diffuse = Material::diffuse(Vec3::splat(0.5));
+        let glossy = Material {
+            kd: Vec3::splat(0.4),
+            specular: Some(Specular {
+                ks: Vec3::splat(0.3),
+                exponent: 37,
+            }),
+        };
+        for material in [diffuse, glossy] {
+            for p in &scene.points {
+                let a = fast.shade(&material, p.point, p.normal, p.view);
+                let b = base.shade(&material, p.point, p.normal, p.view);
+                assert_eq!(
+                    a.to_array().map(f64::to_bits),
+                    b.to_array().map(f64::to_bits)
+                );
+                if material.specular.is_none() {
+                    let exact = tree
+                        .shading(Lambert::new(material.kd))
+                        .exact_query(&crate::sweep::query(p), Unoccluded);
+                    let scale = exact.max_element().max(1e-30);
+                    assert!(
+                        (a - exact).abs().max_element() <= 1e-5 * scale,
+                        "{a} against {exact}"
+                    );
+                }
+            }
         }
     }
 }
