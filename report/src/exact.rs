@@ -44,6 +44,7 @@ pub struct SoaLights {
     chunks: Vec<Chunk>,
     /// Whether to run the build's baseline copy even where the processor
     /// has AVX2 (see [`baseline`](Self::baseline)).
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     baseline: bool,
 }
 
