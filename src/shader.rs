@@ -231,6 +231,32 @@ pub trait Shader {
         None
     }
 
+    /// [`sum_lanes_coarse`](Self::sum_lanes_coarse) of a whole small
+    /// scene in one call: the `count` lights that `lanes` hold side by side
+    /// (as there, but any number of them; the cut passes at most 768), with
+    /// a certified bound on the error of the sum: `Some((sum, error))` with
+    /// `|sum - exact| <= error` per channel, or `None`. The cut calls it
+    /// first where it sums a whole small scene, and keeps the result on the
+    /// same terms as a [`sum_lights_coarse`](Self::sum_lights_coarse);
+    /// where it returns `None` or its error is too large, the cut sums the
+    /// scene 64 lights at a time as before. The default returns `None`.
+    /// [`Lambert`] sums blocks of 64 lights as its `sum_lanes_coarse`
+    /// does and adds their lanes in `f64`, so that one call sets up and
+    /// finishes the sum instead of one per block.
+    ///
+    /// [`Lambert`]: crate::Lambert
+    #[inline]
+    fn sum_scene_coarse(
+        &self,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        lanes: &[LightLanes],
+        count: usize,
+    ) -> Option<(DVec3, DVec3)> {
+        let _ = (point, surface, lanes, count);
+        None
+    }
+
     /// Bounds the children of node `parent` of `tree` together, coarsely:
     /// for each child `first_child + i` whose bit `i` is set in `wanted`,
     /// `out[i]` receives `Some` of a certified bound of the child (as

@@ -45,8 +45,13 @@ impl Cone {
     #[must_use]
     pub fn new(point: DVec3, centre: Vec3, radius: f32) -> Option<Self> {
         let offset = centre.as_dvec3() - point;
-        let distance = offset.length();
         let radius = f64::from(radius);
+        // A point well inside the ball (the computed `D` then below `R`)
+        // gets `None` below as well; this skips the square root.
+        if offset.length_squared() < 0.25 * (radius * radius) {
+            return None;
+        }
+        let distance = offset.length();
         // Also false for distance == 0.
         if !(distance - radius > distance * Self::MIN_CLEARANCE) {
             return None;

@@ -57,6 +57,23 @@
 //! `I w` against the `2^-80 I` the relative bound allows at the largest
 //! distance, except for the product `I w` itself and the envelope's `e`,
 //! so the bound adds `2^-140` per light (times `kd`; but see below).
+//!
+//! # Whole scenes
+//!
+//! A small scene's lights, side by side, are summed in one call
+//! ([`sum_scene_lanes_baseline`] and its AVX2 copy): in blocks of
+//! [`COARSE_MAX`] lights as above, each block's eight lane sums (per
+//! channel, and the envelope's) converted to `f64` (exactly) and added,
+//! lane by lane, to lanes of `f64` carried from block to block, whose eight
+//! lanes are added pairwise at the end. Within a block a lane's sum takes
+//! at most 8 roundings, fewer than the analysis above allows, so each
+//! block's sum is within `28.3 u` of its `E` and the envelope within
+//! `17.01 u` of it as before. The `f64` additions (at most `B + 2` on any
+//! term's way for `B` blocks) are each within `2^-53` of their result,
+//! itself at most `1.00002 E`: so within `(B + 2) 2^-53 E`, below `2^-40
+//! E` for any number of lights, inside the margin that [`ERROR_UNITS`]
+//! leaves above `28.4 u` (`3.6 u`, about `2^-22`). So the bound is the
+//! one above, and the range conditions are the same, every block's.
 
 use glam::{DVec3, Vec3};
 
@@ -208,6 +225,81 @@ pub(crate) fn sum_baseline(
     Frame::total(&sums, kd, lights.len())
 }
 
+/// Lights a block of a whole scene's sum takes (module docs, "Whole
+/// scenes"): eight groups of eight lanes.
+const BLOCK_GROUPS: usize = COARSE_MAX / LANES;
+
+/// A whole scene's lane sums, per channel and the envelope's, carried in
+/// `f64` from block to block (module docs, "Whole scenes").
+type Wide = [[f64; LANES]; 4];
+
+/// The eight lanes of `wide` added pairwise, `((l0 + l1) + (l2 + l3)) +
+/// ((l4 + l5) + (l6 + l7))`, per quantity.
+#[inline(always)]
+fn wide_totals(wide: &Wide) -> [f64; 4] {
+    wide.map(|s| ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7])))
+}
+
+/// `kd` times the summed channels and the bound, as [`Frame::finish`],
+/// from the `f64` totals of a whole scene (module docs, "Whole scenes").
+#[inline(always)]
+fn finish_wide(
+    [r, g, b, envelope]: [f64; 4],
+    kd: DVec3,
+    counted: bool,
+    lights: usize,
+) -> (DVec3, DVec3) {
+    let lights = if counted { lights } else { 0 };
+    let error = (ERROR_UNITS * U * envelope + lights as f64 * UNDERFLOW) * (1.0 + 1e-12);
+    let sum = kd * DVec3::new(r, g, b);
+    (sum, kd * error * (1.0 + 1e-12) + sum * 1e-15)
+}
+
+/// The sum of a whole scene of `count` lights side by side in `lanes`
+/// (light `i` in lane `i % 8` of `lanes[i / 8]`) and its bound, in blocks
+/// of [`COARSE_MAX`] lights (module docs, "Whole scenes"); `None` for more
+/// lights than the lanes hold, a point that is not an `f32` value, or
+/// lights out of range.
+pub(crate) fn sum_scene_lanes_baseline(
+    kd: DVec3,
+    surface: &Surface,
+    lanes: &[LightLanes],
+    count: usize,
+) -> Option<(DVec3, DVec3)> {
+    if count > lanes.len() * LANES {
+        return None;
+    }
+    let frame = Frame::new(surface)?;
+    let mut wide: Wide = [[0.0; LANES]; 4];
+    let (mut in_range, mut any) = (true, false);
+    let groups = &lanes[..count.div_ceil(LANES)];
+    for (b, block) in groups.chunks(BLOCK_GROUPS).enumerate() {
+        let mut sums = Sums {
+            rgb: [[0.0; LANES]; 3],
+            envelope: [0.0; LANES],
+            in_range: true,
+            any: false,
+        };
+        let first = b * COARSE_MAX;
+        for i in 0..(count - first).min(COARSE_MAX) {
+            let (group, k) = (&block[i / LANES], i % LANES);
+            let light = PointLight::new(
+                Vec3::new(group.x[k], group.y[k], group.z[k]),
+                Vec3::new(group.red[k], group.green[k], group.blue[k]),
+            );
+            frame.add(&light, k, &mut sums);
+        }
+        in_range &= sums.in_range;
+        any |= sums.any;
+        for (wide, lanes) in wide.iter_mut().zip(sums.rgb.iter().chain([&sums.envelope])) {
+            for (w, &s) in wide.iter_mut().zip(lanes) {
+                *w += f64::from(s);
+            }
+        }
+    }
+    in_range.then(|| finish_wide(wide_totals(&wide), kd, any, count))
+}
+
 /// The AVX2 sums of [`sum_avx2`] and [`sum_lanes_avx2`]: per lane, the
 /// operations of [`Frame::add`] (no fused multiply-add), so the same bits
 /// as the baseline. The range is checked in every lane added, those left
@@ -294,6 +386,28 @@ impl Sums8 {
             _mm256_cmp_ps::<_CMP_LE_OQ>(largest, _mm256_set1_ps(INTENSITY_MAX)),
         );
         self.in_range = _mm256_and_ps(self.in_range, ok);
+    }
+
+    /// Adds the lanes' sums of the channels and of the envelope to the
+    /// `f64` lanes `wide` (`wide[2 q]` lanes 0 to 3 of quantity `q`,
+    /// `wide[2 q + 1]` lanes 4 to 7) and clears them; the range and the
+    /// lights counted carry on (module docs, "Whole scenes").
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn flush(&mut self, wide: &mut [core::arch::x86_64::__m256d; 8]) {
+        use core::arch::x86_64::{
+            _mm256_add_pd, _mm256_castps256_ps128, _mm256_cvtps_pd, _mm256_extractf128_ps,
+            _mm256_setzero_ps,
+        };
+        let [r, g, b] = self.rgb;
+        for (q, v) in [r, g, b, self.envelope].into_iter().enumerate() {
+            let low = _mm256_cvtps_pd(_mm256_castps256_ps128(v));
+            let high = _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(v));
+            wide[2 * q] = _mm256_add_pd(wide[2 * q], low);
+            wide[2 * q + 1] = _mm256_add_pd(wide[2 * q + 1], high);
+        }
+        self.rgb = [_mm256_setzero_ps(); 3];
+        self.envelope = _mm256_setzero_ps();
     }
 
     /// The lanes' sums, each added as `((l0 + l1) + (l2 + l3)) + ((l4 +
@@ -429,6 +543,27 @@ pub(crate) fn sum_lanes_baseline(
     sum_baseline(kd, surface, &lights[..count])
 }
 
+/// The six quantities of the eight lights of a group, one vector each
+/// (each one load: the compiler folds the eight lanes). A macro rather than
+/// a closure, as in `sum_avx2`.
+#[cfg(target_arch = "x86_64")]
+macro_rules! load_lanes {
+    ($group:expr) => {{
+        let g: &LightLanes = $group;
+        let load = |a: &[f32; 8]| {
+            core::arch::x86_64::_mm256_setr_ps(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7])
+        };
+        [
+            load(&g.x),
+            load(&g.y),
+            load(&g.z),
+            load(&g.red),
+            load(&g.green),
+            load(&g.blue),
+        ]
+    }};
+}
+
 /// [`sum_lanes_baseline`] with AVX2 instructions ([`Sums8`]): each
 /// quantity of eight lights one load, so the same bits.
 #[cfg(target_arch = "x86_64")]
@@ -439,38 +574,64 @@ pub(crate) fn sum_lanes_avx2(
     lanes: &[LightLanes],
     count: usize,
 ) -> Option<(DVec3, DVec3)> {
-    use core::arch::x86_64::_mm256_setr_ps;
     if count > COARSE_MAX || count > lanes.len() * LANES {
         return None;
     }
     let frame = Frame::new(surface)?;
     let mut sums = Sums8::new(&frame);
-    // Each quantity one load (the compiler folds the eight lanes). A macro
-    // rather than a closure, as in `sum_avx2`.
-    macro_rules! load {
-        ($group:expr) => {{
-            let g: &LightLanes = $group;
-            let load =
-                |a: &[f32; 8]| _mm256_setr_ps(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]);
-            [
-                load(&g.x),
-                load(&g.y),
-                load(&g.z),
-                load(&g.red),
-                load(&g.green),
-                load(&g.blue),
-            ]
-        }};
-    }
     let (full, rest) = (count / LANES, count % LANES);
     for group in &lanes[..full] {
-        sums.add(load!(group), None);
+        sums.add(load_lanes!(group), None);
     }
     if rest > 0 {
         // The lanes past the last light are left out.
-        sums.add(load!(&lanes[full]), last_lanes(rest));
+        sums.add(load_lanes!(&lanes[full]), last_lanes(rest));
     }
     sums.finish(kd, count)
+}
+
+/// [`sum_scene_lanes_baseline`] with AVX2 instructions ([`Sums8`]): each
+/// quantity of eight lights one load, each block's lanes carried in `f64`
+/// vectors, so the same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(crate) fn sum_scene_lanes_avx2(
+    kd: DVec3,
+    surface: &Surface,
+    lanes: &[LightLanes],
+    count: usize,
+) -> Option<(DVec3, DVec3)> {
+    use core::arch::x86_64::{_mm256_movemask_ps, _mm256_setzero_pd};
+    if count > lanes.len() * LANES {
+        return None;
+    }
+    let frame = Frame::new(surface)?;
+    let mut sums = Sums8::new(&frame);
+    let mut wide = [_mm256_setzero_pd(); 8];
+    let (full, rest) = (count / LANES, count % LANES);
+    for (b, block) in lanes[..count.div_ceil(LANES)]
+        .chunks(BLOCK_GROUPS)
+        .enumerate()
+    {
+        for (j, group) in block.iter().enumerate() {
+            // The lanes past the last light are left out.
+            let mask = if b * BLOCK_GROUPS + j == full {
+                last_lanes(rest)
+            } else {
+                None
+            };
+            sums.add(load_lanes!(group), mask);
+        }
+        sums.flush(&mut wide);
+    }
+    if _mm256_movemask_ps(sums.in_range) != 0xff {
+        return None;
+    }
+    let wide: Wide = core::array::from_fn(|q| {
+        core::array::from_fn(|i| crate::dispatch::lane_of(wide[2 * q + i / 4], i % 4))
+    });
+    let counted = _mm256_movemask_ps(sums.any) != 0;
+    Some(finish_wide(wide_totals(&wide), kd, counted, count))
 }
 
 #[cfg(test)]
@@ -626,6 +787,101 @@ mod tests {
                 }
             }
         }
+        assert!(worst > 0.0, "no sum was off at all");
+    }
+
+    /// A whole scene's sum in blocks ([`Shader::sum_scene_coarse`]): the
+    /// same bits in both copies, within its bound of the compensated sum of
+    /// `eval` for 0 to 200 lights and 768 (blocks full or not; above, in,
+    /// a hair off and below the tangent plane, dark and bright), the bound
+    /// within `33 * 2^-24 kd sum max_k I_k / d^2`, and `None` out of range (a light on the point, one at `2^31` of it, an
+    /// intensity past `2^40`) or for fewer groups than the lights need.
+    #[test]
+    fn whole_scene_sums_stay_within_their_bounds() {
+        let mut state = 37u64;
+        let mut uniform = move || crate::testing::uniform(&mut state);
+        let lambert = Lambert::new(Vec3::new(0.9, 0.5, 0.25));
+        let kd = Vec3::new(0.9, 0.5, 0.25).as_dvec3();
+        let (mut kept, mut worst) = (0, 0.0f64);
+        for round in 0..1000 {
+            let p = Vec3::new(uniform() * 8.0, uniform() * 8.0, uniform() * 2.0);
+            let normal = Vec3::new(uniform() - 0.5, uniform() - 0.5, 1.0) * (0.1 + 3.0 * uniform());
+            let surface = Surface::new(p, normal, None).unwrap();
+            let count = if round % 50 == 49 { 768 } else { round % 201 };
+            let odd = (round / 7) % 8;
+            let n = normal.normalize();
+            let lights: Vec<PointLight> = (0..count)
+                .map(|i| {
+                    let offset =
+                        Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5) * 20.0;
+                    let flat = offset - n * offset.dot(n);
+                    let position = match (round + i) % 5 {
+                        0 => p + flat,
+                        1 => p + flat + n * (i as f32 - 3.0) * 1e-6,
+                        _ => p + offset,
+                    };
+                    let dark = (round + i) % 7 == 0;
+                    let intensity = Vec3::new(uniform(), uniform() * 4.0, uniform() * 0.1);
+                    let mut light = PointLight::new(
+                        position,
+                        if dark { Vec3::ZERO } else { intensity * 100.0 },
+                    );
+                    if i == count / 2 {
+                        match odd {
+                            1 => light.position = p,
+                            2 => light.position = p + Vec3::X * 2_147_483_648.0,
+                            3 => light.intensity.y = 2.0e12,
+                            _ => {}
+                        }
+                    }
+                    light
+                })
+                .collect();
+            let lanes = crate::LightLanes::of(&lights);
+            let sum = lambert.sum_scene_coarse(&(), &surface, &lanes, count);
+            let base = baseline(|| lambert.sum_scene_coarse(&(), &surface, &lanes, count));
+            let bits = |r: Option<(DVec3, DVec3)>| {
+                r.map(|(s, e)| {
+                    (
+                        s.to_array().map(f64::to_bits),
+                        e.to_array().map(f64::to_bits),
+                    )
+                })
+            };
+            assert_eq!(bits(sum), bits(base), "round {round}, {count} lights");
+            if count > 8 {
+                let short = &lanes[..lanes.len() - 1];
+                assert_eq!(lambert.sum_scene_coarse(&(), &surface, short, count), None);
+            }
+            let refused = count > 0 && (1..=3).contains(&odd);
+            assert_eq!(sum.is_none(), refused, "round {round}, {count} lights");
+            let Some((sum, error)) = sum else {
+                continue;
+            };
+            kept += 1;
+            let mut exact = crate::numeric::CompensatedSum::default();
+            let mut envelope = 0.0;
+            for light in &lights {
+                let (x, i) = (light.position.as_dvec3(), light.intensity.as_dvec3());
+                exact.add(lambert.eval(&(), &surface, x, i));
+                envelope += i.max_element() / (x - surface.point).length_squared();
+            }
+            let exact = exact.value();
+            for k in 0..3 {
+                let off = (sum[k] - exact[k]).abs();
+                assert!(
+                    off <= error[k] + 1e-12 * exact[k],
+                    "round {round}, {count} lights: {sum} against {exact}, bound {error}"
+                );
+                assert!(
+                    error[k] <= 33.0 * U * kd[k] * envelope * (1.0 + 1e-6) + 1e-15 * sum[k] + 1e-30
+                );
+                if error[k] > 0.0 {
+                    worst = worst.max(off / error[k]);
+                }
+            }
+        }
+        assert!(kept > 500 && kept < 1000, "{kept} sums in range");
         assert!(worst > 0.0, "no sum was off at all");
     }
 

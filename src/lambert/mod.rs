@@ -403,6 +403,31 @@ impl Shader for Lambert {
         coarse::sum_lanes_baseline(self.kd, surface, lanes, count)
     }
 
+    /// Blocks of 64 lights summed as by
+    /// [`sum_lanes_coarse`](Shader::sum_lanes_coarse), their lanes added
+    /// in `f64`: the same bound (see the rounding analysis of the coarse
+    /// sums), one call for the whole scene.
+    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
+    // `dispatch`).
+    #[allow(unsafe_code)]
+    #[inline]
+    fn sum_scene_coarse(
+        &self,
+        _: &(),
+        surface: &Surface,
+        lanes: &[LightLanes],
+        count: usize,
+    ) -> Option<(DVec3, DVec3)> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::dispatch::avx2() {
+                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+                return unsafe { coarse::sum_scene_lanes_avx2(self.kd, surface, lanes, count) };
+            }
+        }
+        coarse::sum_scene_lanes_baseline(self.kd, surface, lanes, count)
+    }
+
     /// With [`BoundKind::Series`], the children side by side in `f32`
     /// lanes (see the `group` module's rounding analysis), each scaled by
     /// `I_k kd_k / D^2` in `f64`; children too far or too near for `f32`

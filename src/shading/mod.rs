@@ -69,7 +69,7 @@ struct Scratch {
 impl LightTree {
     /// A shading session for `shader` over this tree.
     ///
-    /// For a small scene (at most 768 lights, none of them coincident) the
+    /// For a small scene (at most 1,024 lights, none of them coincident) the
     /// session keeps a copy of the lights side by side ([`LightLanes`], 24
     /// bytes a light), from which the shader sums them (see
     /// [`shade_query`](Shading::shade_query)).
@@ -115,7 +115,7 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// of at most 32 lights, and without a budget those of at most 512
     /// lights near the point for their size (`n D^2 <= 512 R^2` for `n`
     /// lights within `R` of a centroid at distance `D`), are summed light by
-    /// light when they enter the cut, and a tree of at most 256 lights (768
+    /// light when they enter the cut, and a tree of at most 256 lights (1,024
     /// where the threshold lets lights be summed coarsely, see
     /// [`Shader::sum_lights_coarse`]; none of them coincident) whose lights
     /// are known visible is summed whole when its root alone does not meet
@@ -123,14 +123,14 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// needs bounded nodes, nor beyond the budget). Summed lights carry no
     /// error beyond the coarse sums' certified rounding. A small scene keeps
     /// its lights side by side as well ([`LightLanes`], 24 bytes a light,
-    /// in the session), for the shader's
-    /// [`Shader::sum_lanes_coarse`]; when the point lies in the root's ball
-    /// it is summed at once, without setting up the cut (the same result).
-    /// So is a scene of at most 64 lights wherever the point lies, and
-    /// whether or not its root's bound would meet the threshold (one coarse
-    /// sum costs less than bounding the root); a host's cut that is told
-    /// the root is visible then sums it the same way, with the same
-    /// result.
+    /// in the session), for the shader's [`Shader::sum_scene_coarse`],
+    /// which sums them in one call (else [`Shader::sum_lanes_coarse`], 64
+    /// at a time); when the point lies in the root's ball it is summed at
+    /// once, without setting up the cut (the same result). So is a scene of
+    /// at most 128 lights wherever the point lies, and whether or not its
+    /// root's bound would meet the threshold (the sum costs less than
+    /// bounding the root); a host's cut that is told the root is visible
+    /// then sums it the same way, with the same result.
     ///
     /// `visibility` is the host's ray tracer ([`Visibility`]); pass
     /// [`Unoccluded`] for none, or `&mut host` to keep the host.
@@ -345,11 +345,13 @@ mod tests {
     }
 
     /// A small scene summed from its lights side by side, without setting
-    /// up the cut, gives the bits and counts of the cut over the same tree
-    /// without them (which sums the lights one record at a time): scenes
-    /// of 2 to 768 lights, points inside and outside the root's ball, and
+    /// up the cut, gives the counts of the cut over the same tree without
+    /// them (which sums the lights 64 records at a time), and its bits
+    /// wherever the whole scene is not summed at once; where it is, both
+    /// are within their bounds of the exact sum and meet the target: scenes
+    /// of 2 to 1,024 lights, points inside and outside the root's ball, and
     /// thresholds with and without coarse sums, budgets and interpolation.
-    /// A scene of at most 64 lights is summed wherever the point lies:
+    /// A scene of at most 128 lights is summed wherever the point lies:
     /// outside the root's ball that sum is within its bound of the exact
     /// sum and meets the target, the root is counted, and a host that
     /// answers "visible" at the root gets the same bits.
@@ -357,10 +359,12 @@ mod tests {
     fn small_scenes_summed_side_by_side_match_the_cut() {
         let mut state = 37u64;
         let mut uniform = move || crate::testing::uniform(&mut state);
-        let (mut fast, mut tiny, mut asked) = (0, 0, 0);
-        for (round, count) in [2usize, 7, 8, 9, 64, 65, 100, 300, 512, 767, 768]
-            .into_iter()
-            .enumerate()
+        let (mut fast, mut tiny, mut asked, mut wholes) = (0, 0, 0, 0);
+        for (round, count) in [
+            2usize, 7, 8, 9, 64, 65, 100, 128, 129, 300, 512, 768, 1023, 1024,
+        ]
+        .into_iter()
+        .enumerate()
         {
             let lights: Vec<PointLight> = (0..count)
                 .map(|_| {
@@ -404,7 +408,10 @@ mod tests {
                 {
                     // Where the cut would bound the root first.
                     tiny += 1;
-                    assert!(count <= 64, "{count} lights summed outside the root's ball");
+                    assert!(
+                        count <= 128,
+                        "{count} lights summed outside the root's ball"
+                    );
                     assert_eq!(bits(&a), bits(summed));
                     assert_eq!((a.nodes_evaluated, a.lights_evaluated), (1, count as u32));
                     let exact = with.exact_query(&query, Unoccluded);
@@ -426,12 +433,24 @@ mod tests {
                         assert!(host.certifies(exact));
                         assert!(threshold.met(host.radiance, host.error_bound, 0.0));
                     }
-                } else {
-                    assert_eq!(bits(&a), bits(&b), "{count} lights, point {k}");
+                } else if bits(&a) != bits(&b) {
+                    // The whole scene summed in one call with its lights
+                    // side by side, 64 at a time from their records.
+                    wholes += 1;
+                    let counts = |r: &ShadeResult| (r.nodes_evaluated, r.lights_evaluated, r.stop);
+                    assert_eq!(counts(&a), counts(&b), "{count} lights, point {k}");
+                    assert_eq!(a.lights_evaluated, count as u32);
+                    let exact = with.exact_query(&query, Unoccluded);
+                    assert!(
+                        a.certifies(exact) && b.certifies(exact),
+                        "{a:?} {b:?} {exact}"
+                    );
+                    assert!(threshold.met(a.radiance, a.error_bound, 0.0));
                 }
             }
         }
-        assert!(fast > 60 && fast < 400, "{fast} sums without the cut");
+        assert!(fast > 60 && fast < 500, "{fast} sums without the cut");
+        assert!(wholes > 20, "{wholes} whole sums");
         assert!(
             tiny > 10 && asked > 5,
             "{tiny} sums outside the root's ball, {asked} asked"

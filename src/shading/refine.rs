@@ -943,8 +943,10 @@ fn settle_visible<S: Shader>(
 
 /// The sum of a whole small scene, `lights` and the same lights side by
 /// side in `lanes`, visible, times `weight`, settled into `settled` and its
-/// error into `error_sum`, [`COARSE_LIGHTS_MAX`] lights at a time: the
-/// shader's [`Shader::sum_lanes_coarse`] where it has one, else its
+/// error into `error_sum`: in one call, the shader's
+/// [`Shader::sum_scene_coarse`], kept where its error is at most `share`
+/// of the sum channel by channel; else [`COARSE_LIGHTS_MAX`] lights at a
+/// time: the shader's [`Shader::sum_lanes_coarse`] where it has one, else its
 /// [`Shader::sum_lights_coarse`], kept where the sum's error is at most
 /// `share` of it channel by channel (as [`Cut::sum_seen_coarse`]); else
 /// [`settle_visible`].
@@ -957,8 +959,23 @@ fn settle_small_scene<S: Shader>(
     (share, weight): (f64, f64),
     (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
 ) {
-    let groups = lanes.chunks(COARSE_LIGHTS_MAX / 8);
-    for (lights, lanes) in lights.chunks(COARSE_LIGHTS_MAX).zip(groups) {
+    if let Some((sum, error)) = shader.sum_scene_coarse(per_point, surface, lanes, lights.len())
+        && error.cmple(sum * share).all()
+    {
+        settled.add(sum * weight);
+        *error_sum += error * weight;
+        return;
+    }
+    // Lights `start..` and their lanes from `start / 8` (a multiple of
+    // eight): an index rather than zipped chunks, whose lengths take
+    // divisions.
+    let mut start = 0;
+    while start < lights.len() && start / 8 < lanes.len() {
+        let end = (start + COARSE_LIGHTS_MAX).min(lights.len());
+        let first = start / 8;
+        let lanes = &lanes[first..(first + COARSE_LIGHTS_MAX / 8).min(lanes.len())];
+        let lights = &lights[start..end];
+        start = end;
         let sum = shader
             .sum_lanes_coarse(per_point, surface, lanes, lights.len())
             .or_else(|| shader.sum_lights_coarse(per_point, surface, lights));
@@ -974,18 +991,26 @@ fn settle_small_scene<S: Shader>(
 
 /// Whether a small scene (its lights side by side in `lanes`) is summed
 /// whole wherever the point lies, once known visible: at most
-/// [`COARSE_LIGHTS_MAX`] lights (one coarse sum, which costs less than
-/// bounding the root), and no plane recorded at the root. The one rule for
-/// [`shade_small_scene`] and [`Cut::sums_tiny_scene`].
+/// [`TINY_SCENE_LIGHTS`] lights (one coarse sum of the scene, which costs
+/// less than bounding the root), and no plane recorded at the root. The
+/// one rule for [`shade_small_scene`] and [`Cut::sums_tiny_scene`].
 #[inline(always)]
 fn tiny_scene(tree: &LightTree, lanes: &[LightLanes]) -> bool {
     !lanes.is_empty()
         && tree
             .nodes
             .first()
-            .is_some_and(|root| root.light_count as usize <= COARSE_LIGHTS_MAX)
+            .is_some_and(|root| root.light_count as usize <= TINY_SCENE_LIGHTS)
         && tree.node_plane(0).is_none()
 }
+
+/// Scenes summed whole wherever the point lies ([`tiny_scene`]). Measured
+/// with lights in a 10 x 10 x 1 box 5 units above the ground and points on
+/// the ground up to 500 units away (the mean of 20,000 passes over 128
+/// points, one core, certified 1%): the sum of 64, 65 and 128 lights took
+/// 0.13, 0.14 and 0.19 us per point, while the cut of 129 and 256 lights,
+/// whose root alone met the target, took 0.26 and 0.28.
+const TINY_SCENE_LIGHTS: usize = 128;
 
 /// The cut of a small scene whose lights are known visible (`lanes` side
 /// by side, see [`Cut::sums_whole_scene`]), summed without setting up the

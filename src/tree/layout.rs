@@ -225,16 +225,16 @@ pub(crate) const NO_PLANE: u32 = u32::MAX;
 pub(crate) const SMALL_SCENE_LIGHTS: u32 = 256;
 
 /// [`SMALL_SCENE_LIGHTS`] where the lights are summed coarsely
-/// ([`Shader::sum_lanes_coarse`](crate::Shader::sum_lanes_coarse), for
-/// relative targets of at least `2^-12`; `Lambert` under 2 ns per light
-/// from lights kept side by side, in groups of 64). Measured on the
-/// street city, one point at a time, alternating with the vectorized exact
-/// sum (medians of 61 passes, two runs each): at a certified 1%, with the
-/// limit at 512 and at 1,024, the sum took 1.16 us per point at 700 lights
-/// against the cut's 1.38-1.41, 1.32-1.37 at 800 against 1.53-1.56, but
-/// 2.16-2.24 at 1,000 against 1.87; at 30% it took 0.97-1.03 us at 600
-/// lights against 1.19, and 1.27 at 800 as the cut did.
-pub(crate) const SMALL_SCENE_LIGHTS_COARSE: u32 = 768;
+/// ([`Shader::sum_scene_coarse`](crate::Shader::sum_scene_coarse), for
+/// relative targets of at least `2^-12`; `Lambert` about 1 ns per light
+/// from lights kept side by side, in one call). Measured on the street
+/// city, one point at a time (the mean of 5,000 passes over 128 points,
+/// one core): the whole sum took 0.71-0.77, 0.85-1.14, 1.09-1.13 and 1.29-1.46
+/// us per point at 800, 1,000, 1,300 and 1,600 lights, the cut at
+/// certified targets of 30%, 10% and 1% 0.99-1.10, 1.02-1.27, 1.12-1.32
+/// and 1.19-1.38: the sum is the cheaper up to about 1,000 lights at every
+/// target, beyond only at the tighter ones.
+pub(crate) const SMALL_SCENE_LIGHTS_COARSE: u32 = 1024;
 
 impl LightTree {
     /// Whether the tree may be a small scene (see [`SMALL_SCENE_LIGHTS`]
