@@ -601,7 +601,10 @@ pub(crate) fn sum_scene_lanes_avx2(
     lanes: &[LightLanes],
     count: usize,
 ) -> Option<(DVec3, DVec3)> {
-    use core::arch::x86_64::{_mm256_movemask_ps, _mm256_setzero_pd};
+    use core::arch::x86_64::{
+        _mm_add_pd, _mm_cvtsd_f64, _mm_unpackhi_pd, _mm256_castpd256_pd128, _mm256_extractf128_pd,
+        _mm256_hadd_pd, _mm256_movemask_ps, _mm256_setzero_pd,
+    };
     if count > lanes.len() * LANES {
         return None;
     }
@@ -627,11 +630,18 @@ pub(crate) fn sum_scene_lanes_avx2(
     if _mm256_movemask_ps(sums.in_range) != 0xff {
         return None;
     }
-    let wide: Wide = core::array::from_fn(|q| {
-        core::array::from_fn(|i| crate::dispatch::lane_of(wide[2 * q + i / 4], i % 4))
+    // As `wide_totals`, the operations side by side: `(l0 + l1, l4 + l5,
+    // l2 + l3, l6 + l7)`, its halves added, then those two lanes.
+    let totals: [f64; 4] = core::array::from_fn(|q| {
+        let pairs = _mm256_hadd_pd(wide[2 * q], wide[2 * q + 1]);
+        let halves = _mm_add_pd(
+            _mm256_castpd256_pd128(pairs),
+            _mm256_extractf128_pd::<1>(pairs),
+        );
+        _mm_cvtsd_f64(halves) + _mm_cvtsd_f64(_mm_unpackhi_pd(halves, halves))
     });
     let counted = _mm256_movemask_ps(sums.any) != 0;
-    Some(finish_wide(wide_totals(&wide), kd, counted, count))
+    Some(finish_wide(totals, kd, counted, count))
 }
 
 #[cfg(test)]

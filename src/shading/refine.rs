@@ -941,6 +941,23 @@ fn settle_visible<S: Shader>(
     }
 }
 
+/// The shader's [`Shader::sum_scene_coarse`] of a whole small scene,
+/// `lights` side by side in `lanes`, where its error is at most `share` of
+/// the sum channel by channel (the first step of [`settle_small_scene`]).
+#[inline(always)]
+fn whole_scene_sum<S: Shader>(
+    shader: &S,
+    per_point: &S::PerPoint,
+    surface: &Surface,
+    lanes: &[LightLanes],
+    lights: &[PointLight],
+    share: f64,
+) -> Option<(DVec3, DVec3)> {
+    shader
+        .sum_scene_coarse(per_point, surface, lanes, lights.len())
+        .filter(|(sum, error)| error.cmple(*sum * share).all())
+}
+
 /// The sum of a whole small scene, `lights` and the same lights side by
 /// side in `lanes`, visible, times `weight`, settled into `settled` and its
 /// error into `error_sum`: in one call, the shader's
@@ -959,13 +976,32 @@ fn settle_small_scene<S: Shader>(
     (share, weight): (f64, f64),
     (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
 ) {
-    if let Some((sum, error)) = shader.sum_scene_coarse(per_point, surface, lanes, lights.len())
-        && error.cmple(sum * share).all()
-    {
+    if let Some((sum, error)) = whole_scene_sum(shader, per_point, surface, lanes, lights, share) {
         settled.add(sum * weight);
         *error_sum += error * weight;
         return;
     }
+    settle_scene_chunks(
+        shader,
+        per_point,
+        surface,
+        (lights, lanes),
+        (share, weight),
+        (settled, error_sum),
+    );
+}
+
+/// The second step of [`settle_small_scene`]: the scene
+/// [`COARSE_LIGHTS_MAX`] lights at a time.
+#[inline(always)]
+fn settle_scene_chunks<S: Shader>(
+    shader: &S,
+    per_point: &S::PerPoint,
+    surface: &Surface,
+    (lights, lanes): (&[PointLight], &[LightLanes]),
+    (share, weight): (f64, f64),
+    (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
+) {
     // Lights `start..` and their lanes from `start / 8` (a multiple of
     // eight): an index rather than zipped chunks, whose lengths take
     // divisions.
@@ -1053,18 +1089,28 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
         return None;
     }
     let per_point = shader.prepare(surface);
-    let (mut settled, mut settled_error) = (CompensatedSum::default(), DVec3::ZERO);
-    settle_small_scene(
-        shader,
-        &per_point,
-        surface,
-        (&tree.lights, lanes),
-        (share, 1.0),
-        (&mut settled, &mut settled_error),
-    );
+    // What `settle_small_scene` leaves in empty sums: where the whole
+    // scene's sum is kept, the sum itself (a compensated sum of one term
+    // from zero is the term) and its error.
+    let (settled, settled_error) =
+        match whole_scene_sum(shader, &per_point, surface, lanes, &tree.lights, share) {
+            Some(sum) => sum,
+            None => {
+                let (mut settled, mut error) = (CompensatedSum::default(), DVec3::ZERO);
+                settle_scene_chunks(
+                    shader,
+                    &per_point,
+                    surface,
+                    (&tree.lights, lanes),
+                    (share, 1.0),
+                    (&mut settled, &mut error),
+                );
+                (settled.value(), error)
+            }
+        };
     // As the cut's end with an empty error list: its sums are +0.
     Some(ShadeResult {
-        radiance: settled.value() + DVec3::ZERO,
+        radiance: settled + DVec3::ZERO,
         error_bound: reported_bound(DVec3::ZERO + settled_error),
         nodes_evaluated: 1,
         lights_evaluated: lights,
