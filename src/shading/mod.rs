@@ -127,7 +127,7 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// which sums them in one call (else [`Shader::sum_lanes_coarse`], 64
     /// at a time); when the point lies in the root's ball it is summed at
     /// once, without setting up the cut (the same result). So is a scene of
-    /// at most 128 lights wherever the point lies, and whether or not its
+    /// at most 192 lights wherever the point lies, and whether or not its
     /// root's bound would meet the threshold (the sum costs less than
     /// bounding the root); a host's cut that is told the root is visible
     /// then sums it the same way, with the same result.
@@ -351,7 +351,7 @@ mod tests {
     /// are within their bounds of the exact sum and meet the target: scenes
     /// of 2 to 1,024 lights, points inside and outside the root's ball, and
     /// thresholds with and without coarse sums, budgets and interpolation.
-    /// A scene of at most 128 lights is summed wherever the point lies:
+    /// A scene of at most 192 lights is summed wherever the point lies:
     /// outside the root's ball that sum is within its bound of the exact
     /// sum and meets the target, the root is counted, and a host that
     /// answers "visible" at the root gets the same bits.
@@ -361,7 +361,7 @@ mod tests {
         let mut uniform = move || crate::testing::uniform(&mut state);
         let (mut fast, mut tiny, mut asked, mut wholes) = (0, 0, 0, 0);
         for (round, count) in [
-            2usize, 7, 8, 9, 64, 65, 100, 128, 129, 300, 512, 768, 1023, 1024,
+            2usize, 7, 8, 9, 64, 65, 100, 192, 193, 300, 512, 768, 1023, 1024,
         ]
         .into_iter()
         .enumerate()
@@ -409,7 +409,7 @@ mod tests {
                     // Where the cut would bound the root first.
                     tiny += 1;
                     assert!(
-                        count <= 128,
+                        count <= 192,
                         "{count} lights summed outside the root's ball"
                     );
                     assert_eq!(bits(&a), bits(summed));

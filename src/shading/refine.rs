@@ -1043,10 +1043,10 @@ fn tiny_scene(tree: &LightTree, lanes: &[LightLanes]) -> bool {
 /// Scenes summed whole wherever the point lies ([`tiny_scene`]). Measured
 /// with lights in a 10 x 10 x 1 box 5 units above the ground and points on
 /// the ground up to 500 units away (the mean of 20,000 passes over 128
-/// points, one core, certified 1%): the sum of 64, 65 and 128 lights took
-/// 0.13, 0.14 and 0.19 us per point, while the cut of 129 and 256 lights,
-/// whose root alone met the target, took 0.26 and 0.28.
-const TINY_SCENE_LIGHTS: usize = 128;
+/// points, one core, certified 1%): the sum of 128, 192 and 256 lights
+/// took 0.15, 0.22 and 0.25 us per point, the cut of 129, 192 and 256
+/// lights, whose root alone met the target, 0.26, 0.27 and 0.24.
+const TINY_SCENE_LIGHTS: usize = 192;
 
 /// The cut of a small scene whose lights are known visible (`lanes` side
 /// by side, see [`Cut::sums_whole_scene`]), summed without setting up the
