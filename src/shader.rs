@@ -212,7 +212,9 @@ pub trait Shader {
     /// of the last group repeating the last light): `Some` of a sum and a
     /// certified bound on its error as there, or `None`. The cut calls it
     /// where it sums a whole small scene, whose lights it keeps side by
-    /// side for this, and calls `sum_lights_coarse` on the same lights
+    /// side for this, and the scene's
+    /// [`sum_scene_coarse`](Self::sum_scene_coarse) is not kept, 64
+    /// lights at a time, and calls `sum_lights_coarse` on the same lights
     /// where it returns `None`; the default returns `None`. [`Lambert`]
     /// gives the same bits as its `sum_lights_coarse`, loading each
     /// quantity of eight lights with one instruction instead of gathering

@@ -661,17 +661,30 @@ mod tests {
     ) -> Option<(DVec3, DVec3)> {
         let sum = lambert.sum_lights_coarse(&(), surface, lights);
         let base = baseline(|| lambert.sum_lights_coarse(&(), surface, lights));
-        assert_eq!(
-            sum.map(|(s, e)| (
-                s.to_array().map(f64::to_bits),
-                e.to_array().map(f64::to_bits)
-            )),
-            base.map(|(s, e)| (
-                s.to_array().map(f64::to_bits),
-                e.to_array().map(f64::to_bits)
-            )),
-        );
+        assert_eq!(bits(sum), bits(base));
         sum
+    }
+
+    /// The bits of a sum and its bound.
+    fn bits(r: Option<(DVec3, DVec3)>) -> Option<([u64; 3], [u64; 3])> {
+        r.map(|(s, e)| {
+            (
+                s.to_array().map(f64::to_bits),
+                e.to_array().map(f64::to_bits),
+            )
+        })
+    }
+
+    /// Puts `light` out of a coarse sum's range for `odd` of 1 (on the
+    /// point `p`), 2 (at `2^31` of it) or 3 (an intensity past `2^40`);
+    /// leaves it as it is otherwise.
+    fn out_of_range(light: &mut PointLight, p: Vec3, odd: usize) {
+        match odd {
+            1 => light.position = p,
+            2 => light.position = p + Vec3::X * 2_147_483_648.0,
+            3 => light.intensity.y = 2.0e12,
+            _ => {}
+        }
     }
 
     /// The sum of lights side by side gives the bits of the sum of the
@@ -684,14 +697,6 @@ mod tests {
         let mut state = 31u64;
         let mut uniform = move || crate::testing::uniform(&mut state);
         let lambert = Lambert::new(Vec3::new(0.9, 0.5, 0.25));
-        let bits = |r: Option<(DVec3, DVec3)>| {
-            r.map(|(s, e)| {
-                (
-                    s.to_array().map(f64::to_bits),
-                    e.to_array().map(f64::to_bits),
-                )
-            })
-        };
         let mut kept = 0;
         for round in 0..1300 {
             let p = Vec3::new(uniform() * 8.0, uniform() * 8.0, uniform() * 2.0);
@@ -706,12 +711,7 @@ mod tests {
                     let mut light =
                         PointLight::new(p + offset, Vec3::new(uniform(), uniform(), uniform()));
                     if i == count / 2 {
-                        match odd {
-                            1 => light.position = p,
-                            2 => light.position = p + Vec3::X * 2_147_483_648.0,
-                            3 => light.intensity.y = 2.0e12,
-                            _ => {}
-                        }
+                        out_of_range(&mut light, p, odd);
                     }
                     light
                 })
@@ -733,39 +733,90 @@ mod tests {
         assert!(kept > 250 && kept < 1050, "{kept} sums in range");
     }
 
-    /// The coarse sum against the compensated sum of `eval` (within
-    /// `2^-40` relative of the exact terms) over 0 to 64 lights, above,
-    /// below, in and a hair off the tangent plane, dark and bright: within
-    /// its bound, the bound within `33 * 2^-24 kd sum max_k I_k / d^2`,
-    /// and the AVX2 copy the same bits as the baseline.
+    /// `count` lights within 10 of `p` (a point of `surface`, whose normal
+    /// is `normal`): by `round + i`, in the tangent plane, a hair off it or
+    /// anywhere, a seventh of them dark, the others of intensity up to 100
+    /// (red), 400 (green) and 10 (blue).
+    fn plane_lights(
+        uniform: &mut impl FnMut() -> f32,
+        (p, normal): (Vec3, Vec3),
+        count: usize,
+        round: usize,
+    ) -> Vec<PointLight> {
+        let n = normal.normalize();
+        (0..count)
+            .map(|i| {
+                let offset = Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5) * 20.0;
+                let flat = offset - n * offset.dot(n);
+                let position = match (round + i) % 5 {
+                    0 => p + flat,
+                    1 => p + flat + n * (i as f32 - 3.0) * 1e-6,
+                    _ => p + offset,
+                };
+                let dark = (round + i).is_multiple_of(7);
+                let i = Vec3::new(uniform(), uniform() * 4.0, uniform() * 0.1);
+                PointLight::new(position, if dark { Vec3::ZERO } else { i * 100.0 })
+            })
+            .collect()
+    }
+
+    /// Asserts that `(sum, error)` for `lights` at `surface` (with
+    /// `Lambert` of `kd`) is within `error` of the compensated sum of `eval`
+    /// (within `2^-40` relative of the exact terms), and `error` within
+    /// `33 * 2^-24 kd sum max_k I_k / d^2`; returns the largest ratio of a
+    /// channel's actual error to its bound (0 where the bound is 0).
+    fn assert_within_bound(
+        kd: Vec3,
+        surface: &Surface,
+        lights: &[PointLight],
+        (sum, error): (DVec3, DVec3),
+        what: &str,
+    ) -> f64 {
+        let lambert = Lambert::new(kd);
+        let mut exact = crate::numeric::CompensatedSum::default();
+        let mut envelope = 0.0;
+        for light in lights {
+            let (x, i) = (light.position.as_dvec3(), light.intensity.as_dvec3());
+            exact.add(lambert.eval(&(), surface, x, i));
+            envelope += i.max_element() / (x - surface.point).length_squared();
+        }
+        let exact = exact.value();
+        let kd = kd.as_dvec3();
+        let mut worst = 0.0f64;
+        for k in 0..3 {
+            let off = (sum[k] - exact[k]).abs();
+            assert!(
+                off <= error[k] + 1e-12 * exact[k],
+                "{what}: {sum} against {exact}, bound {error}"
+            );
+            assert!(
+                error[k] <= 33.0 * U * kd[k] * envelope * (1.0 + 1e-6) + 1e-15 * sum[k] + 1e-30
+            );
+            if error[k] > 0.0 {
+                worst = worst.max(off / error[k]);
+            }
+        }
+        worst
+    }
+
+    /// The coarse sum against the compensated sum of `eval` over 0 to 64
+    /// lights, above, below, in and a hair off the tangent plane, dark and
+    /// bright: within its bound, the bound within `33 * 2^-24 kd sum max_k
+    /// I_k / d^2`, and the AVX2 copy the same bits as the baseline.
     #[test]
     fn coarse_sums_stay_within_their_bounds() {
         let mut state = 29u64;
         let mut uniform = move || crate::testing::uniform(&mut state);
-        let lambert = Lambert::new(Vec3::new(0.9, 0.5, 0.25));
+        let kd = Vec3::new(0.9, 0.5, 0.25);
+        let lambert = Lambert::new(kd);
         let mut worst = 0.0f64;
         for round in 0..1300 {
             let p = Vec3::new(uniform() * 8.0, uniform() * 8.0, uniform() * 2.0);
             let normal = Vec3::new(uniform() - 0.5, uniform() - 0.5, 1.0) * (0.1 + 3.0 * uniform());
             let surface = Surface::new(p, normal, None).unwrap();
             let count = round % (COARSE_MAX + 1);
-            let lights: Vec<PointLight> = (0..count)
-                .map(|i| {
-                    let offset =
-                        Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5) * 20.0;
-                    let n = normal.normalize();
-                    let flat = offset - n * offset.dot(n);
-                    let position = match (round + i) % 5 {
-                        0 => p + flat,
-                        1 => p + flat + n * (i as f32 - 3.0) * 1e-6,
-                        _ => p + offset,
-                    };
-                    let dark = (round + i) % 7 == 0;
-                    let i = Vec3::new(uniform(), uniform() * 4.0, uniform() * 0.1);
-                    PointLight::new(position, if dark { Vec3::ZERO } else { i * 100.0 })
-                })
-                .collect();
-            let Some((sum, error)) = coarse(&lambert, &surface, &lights) else {
+            let lights = plane_lights(&mut uniform, (p, normal), count, round);
+            let Some(sum) = coarse(&lambert, &surface, &lights) else {
                 // Only a light on the point itself is out of range here.
                 assert!(
                     lights
@@ -774,28 +825,8 @@ mod tests {
                 );
                 continue;
             };
-            let mut exact = crate::numeric::CompensatedSum::default();
-            let mut envelope = 0.0;
-            for light in &lights {
-                let (x, i) = (light.position.as_dvec3(), light.intensity.as_dvec3());
-                exact.add(lambert.eval(&(), &surface, x, i));
-                envelope += i.max_element() / (x - surface.point).length_squared();
-            }
-            let exact = exact.value();
-            let kd = Vec3::new(0.9, 0.5, 0.25).as_dvec3();
-            for k in 0..3 {
-                let off = (sum[k] - exact[k]).abs();
-                assert!(
-                    off <= error[k] + 1e-12 * exact[k],
-                    "round {round}, {count} lights: {sum} against {exact}, bound {error}"
-                );
-                assert!(
-                    error[k] <= 33.0 * U * kd[k] * envelope * (1.0 + 1e-6) + 1e-15 * sum[k] + 1e-30
-                );
-                if error[k] > 0.0 {
-                    worst = worst.max(off / error[k]);
-                }
-            }
+            let what = format!("round {round}, {count} lights");
+            worst = worst.max(assert_within_bound(kd, &surface, &lights, sum, &what));
         }
         assert!(worst > 0.0, "no sum was off at all");
     }
@@ -804,14 +835,15 @@ mod tests {
     /// same bits in both copies, within its bound of the compensated sum of
     /// `eval` for 0 to 200 lights and 768 (blocks full or not; above, in,
     /// a hair off and below the tangent plane, dark and bright), the bound
-    /// within `33 * 2^-24 kd sum max_k I_k / d^2`, and `None` out of range (a light on the point, one at `2^31` of it, an
-    /// intensity past `2^40`) or for fewer groups than the lights need.
+    /// within `33 * 2^-24 kd sum max_k I_k / d^2`, and `None` out of range
+    /// (a light on the point, one at `2^31` of it, an intensity past
+    /// `2^40`) or for fewer groups than the lights need.
     #[test]
     fn whole_scene_sums_stay_within_their_bounds() {
         let mut state = 37u64;
         let mut uniform = move || crate::testing::uniform(&mut state);
-        let lambert = Lambert::new(Vec3::new(0.9, 0.5, 0.25));
-        let kd = Vec3::new(0.9, 0.5, 0.25).as_dvec3();
+        let kd = Vec3::new(0.9, 0.5, 0.25);
+        let lambert = Lambert::new(kd);
         let (mut kept, mut worst) = (0, 0.0f64);
         for round in 0..1000 {
             let p = Vec3::new(uniform() * 8.0, uniform() * 8.0, uniform() * 2.0);
@@ -819,45 +851,13 @@ mod tests {
             let surface = Surface::new(p, normal, None).unwrap();
             let count = if round % 50 == 49 { 768 } else { round % 201 };
             let odd = (round / 7) % 8;
-            let n = normal.normalize();
-            let lights: Vec<PointLight> = (0..count)
-                .map(|i| {
-                    let offset =
-                        Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5) * 20.0;
-                    let flat = offset - n * offset.dot(n);
-                    let position = match (round + i) % 5 {
-                        0 => p + flat,
-                        1 => p + flat + n * (i as f32 - 3.0) * 1e-6,
-                        _ => p + offset,
-                    };
-                    let dark = (round + i) % 7 == 0;
-                    let intensity = Vec3::new(uniform(), uniform() * 4.0, uniform() * 0.1);
-                    let mut light = PointLight::new(
-                        position,
-                        if dark { Vec3::ZERO } else { intensity * 100.0 },
-                    );
-                    if i == count / 2 {
-                        match odd {
-                            1 => light.position = p,
-                            2 => light.position = p + Vec3::X * 2_147_483_648.0,
-                            3 => light.intensity.y = 2.0e12,
-                            _ => {}
-                        }
-                    }
-                    light
-                })
-                .collect();
+            let mut lights = plane_lights(&mut uniform, (p, normal), count, round);
+            if let Some(light) = lights.get_mut(count / 2) {
+                out_of_range(light, p, odd);
+            }
             let lanes = crate::LightLanes::of(&lights);
             let sum = lambert.sum_scene_coarse(&(), &surface, &lanes, count);
             let base = baseline(|| lambert.sum_scene_coarse(&(), &surface, &lanes, count));
-            let bits = |r: Option<(DVec3, DVec3)>| {
-                r.map(|(s, e)| {
-                    (
-                        s.to_array().map(f64::to_bits),
-                        e.to_array().map(f64::to_bits),
-                    )
-                })
-            };
             assert_eq!(bits(sum), bits(base), "round {round}, {count} lights");
             if count > 8 {
                 let short = &lanes[..lanes.len() - 1];
@@ -865,31 +865,12 @@ mod tests {
             }
             let refused = count > 0 && (1..=3).contains(&odd);
             assert_eq!(sum.is_none(), refused, "round {round}, {count} lights");
-            let Some((sum, error)) = sum else {
+            let Some(sum) = sum else {
                 continue;
             };
             kept += 1;
-            let mut exact = crate::numeric::CompensatedSum::default();
-            let mut envelope = 0.0;
-            for light in &lights {
-                let (x, i) = (light.position.as_dvec3(), light.intensity.as_dvec3());
-                exact.add(lambert.eval(&(), &surface, x, i));
-                envelope += i.max_element() / (x - surface.point).length_squared();
-            }
-            let exact = exact.value();
-            for k in 0..3 {
-                let off = (sum[k] - exact[k]).abs();
-                assert!(
-                    off <= error[k] + 1e-12 * exact[k],
-                    "round {round}, {count} lights: {sum} against {exact}, bound {error}"
-                );
-                assert!(
-                    error[k] <= 33.0 * U * kd[k] * envelope * (1.0 + 1e-6) + 1e-15 * sum[k] + 1e-30
-                );
-                if error[k] > 0.0 {
-                    worst = worst.max(off / error[k]);
-                }
-            }
+            let what = format!("round {round}, {count} lights");
+            worst = worst.max(assert_within_bound(kd, &surface, &lights, sum, &what));
         }
         assert!(kept > 500 && kept < 1000, "{kept} sums in range");
         assert!(worst > 0.0, "no sum was off at all");

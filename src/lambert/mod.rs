@@ -294,6 +294,23 @@ fn quadratic_form(s: &[f64; 6], e: DVec3) -> f64 {
 /// vectors of `f64`.
 const GROUP: usize = 8;
 
+/// The coarse sum of the `coarse` module's AVX2 copy `$avx2` where the
+/// processor has AVX2, else of its baseline `$baseline`, on the same
+/// arguments (the same bits either way): the body of each of `Lambert`'s
+/// coarse sums, whose callers allow the unsafe call.
+macro_rules! coarse_sum {
+    ($avx2:ident, $baseline:ident, $($arg:expr),+) => {{
+        #[cfg(target_arch = "x86_64")]
+        {
+            if crate::dispatch::avx2() {
+                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+                return unsafe { coarse::$avx2($($arg),+) };
+            }
+        }
+        coarse::$baseline($($arg),+)
+    }};
+}
+
 impl Shader for Lambert {
     type PerPoint = ();
 
@@ -370,14 +387,7 @@ impl Shader for Lambert {
         surface: &Surface,
         lights: &[PointLight],
     ) -> Option<(DVec3, DVec3)> {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                return unsafe { coarse::sum_avx2(self.kd, surface, lights) };
-            }
-        }
-        coarse::sum_baseline(self.kd, surface, lights)
+        coarse_sum!(sum_avx2, sum_baseline, self.kd, surface, lights)
     }
 
     /// The same bits as [`sum_lights_coarse`](Shader::sum_lights_coarse)
@@ -393,14 +403,14 @@ impl Shader for Lambert {
         lanes: &[LightLanes],
         count: usize,
     ) -> Option<(DVec3, DVec3)> {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                return unsafe { coarse::sum_lanes_avx2(self.kd, surface, lanes, count) };
-            }
-        }
-        coarse::sum_lanes_baseline(self.kd, surface, lanes, count)
+        coarse_sum!(
+            sum_lanes_avx2,
+            sum_lanes_baseline,
+            self.kd,
+            surface,
+            lanes,
+            count
+        )
     }
 
     /// Blocks of 64 lights summed as by
@@ -418,14 +428,14 @@ impl Shader for Lambert {
         lanes: &[LightLanes],
         count: usize,
     ) -> Option<(DVec3, DVec3)> {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                return unsafe { coarse::sum_scene_lanes_avx2(self.kd, surface, lanes, count) };
-            }
-        }
-        coarse::sum_scene_lanes_baseline(self.kd, surface, lanes, count)
+        coarse_sum!(
+            sum_scene_lanes_avx2,
+            sum_scene_lanes_baseline,
+            self.kd,
+            surface,
+            lanes,
+            count
+        )
     }
 
     /// With [`BoundKind::Series`], the children side by side in `f32`

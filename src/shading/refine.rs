@@ -605,11 +605,20 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     && range == (0..tree.lights.len())
                 {
                     // The whole of a small scene: its lights side by side.
-                    settle_small_scene(
-                        self.shader,
-                        &self.per_point,
+                    let (shader, per_point) = (self.shader, &self.per_point);
+                    let whole = whole_scene_sum(
+                        shader,
+                        per_point,
                         self.surface,
-                        (&tree.lights, lanes),
+                        lanes,
+                        &tree.lights,
+                        share,
+                    );
+                    settle_small_scene(
+                        shader,
+                        per_point,
+                        self.surface,
+                        (&tree.lights, lanes, whole),
                         (share, weight),
                         (&mut self.settled, &mut self.settled_error),
                     );
@@ -943,7 +952,7 @@ fn settle_visible<S: Shader>(
 
 /// The shader's [`Shader::sum_scene_coarse`] of a whole small scene,
 /// `lights` side by side in `lanes`, where its error is at most `share` of
-/// the sum channel by channel (the first step of [`settle_small_scene`]).
+/// the sum channel by channel (what [`settle_small_scene`] takes first).
 #[inline(always)]
 fn whole_scene_sum<S: Shader>(
     shader: &S,
@@ -960,10 +969,9 @@ fn whole_scene_sum<S: Shader>(
 
 /// The sum of a whole small scene, `lights` and the same lights side by
 /// side in `lanes`, visible, times `weight`, settled into `settled` and its
-/// error into `error_sum`: in one call, the shader's
-/// [`Shader::sum_scene_coarse`], kept where its error is at most `share`
-/// of the sum channel by channel; else [`COARSE_LIGHTS_MAX`] lights at a
-/// time: the shader's [`Shader::sum_lanes_coarse`] where it has one, else its
+/// error into `error_sum`: `whole`, the scene's [`whole_scene_sum`], where
+/// it was kept; else [`COARSE_LIGHTS_MAX`] lights at a time: the shader's
+/// [`Shader::sum_lanes_coarse`] where it has one, else its
 /// [`Shader::sum_lights_coarse`], kept where the sum's error is at most
 /// `share` of it channel by channel (as [`Cut::sum_seen_coarse`]); else
 /// [`settle_visible`].
@@ -972,36 +980,15 @@ fn settle_small_scene<S: Shader>(
     shader: &S,
     per_point: &S::PerPoint,
     surface: &Surface,
-    (lights, lanes): (&[PointLight], &[LightLanes]),
+    (lights, lanes, whole): (&[PointLight], &[LightLanes], Option<(DVec3, DVec3)>),
     (share, weight): (f64, f64),
     (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
 ) {
-    if let Some((sum, error)) = whole_scene_sum(shader, per_point, surface, lanes, lights, share) {
+    if let Some((sum, error)) = whole {
         settled.add(sum * weight);
         *error_sum += error * weight;
         return;
     }
-    settle_scene_chunks(
-        shader,
-        per_point,
-        surface,
-        (lights, lanes),
-        (share, weight),
-        (settled, error_sum),
-    );
-}
-
-/// The second step of [`settle_small_scene`]: the scene
-/// [`COARSE_LIGHTS_MAX`] lights at a time.
-#[inline(always)]
-fn settle_scene_chunks<S: Shader>(
-    shader: &S,
-    per_point: &S::PerPoint,
-    surface: &Surface,
-    (lights, lanes): (&[PointLight], &[LightLanes]),
-    (share, weight): (f64, f64),
-    (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
-) {
     // Lights `start..` and their lanes from `start / 8` (a multiple of
     // eight): an index rather than zipped chunks, whose lengths take
     // divisions.
@@ -1097,11 +1084,11 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
             Some(sum) => sum,
             None => {
                 let (mut settled, mut error) = (CompensatedSum::default(), DVec3::ZERO);
-                settle_scene_chunks(
+                settle_small_scene(
                     shader,
                     &per_point,
                     surface,
-                    (&tree.lights, lanes),
+                    (&tree.lights, lanes, None),
                     (share, 1.0),
                     (&mut settled, &mut error),
                 );
