@@ -70,10 +70,11 @@
 //! block's sum is within `28.3 u` of its `E` and the envelope within
 //! `17.01 u` of it as before. The `f64` additions (at most `B + 2` on any
 //! term's way for `B` blocks) are each within `2^-53` of their result,
-//! itself at most `1.00002 E`: so within `(B + 2) 2^-53 E`, below `2^-40
-//! E` for any number of lights, inside the margin that [`ERROR_UNITS`]
-//! leaves above `28.4 u` (`3.6 u`, about `2^-22`). So the bound is the
-//! one above, and the range conditions are the same, every block's.
+//! itself at most `1.00002 E`: so within `(B + 2) 2^-53 E`, inside the
+//! margin that [`ERROR_UNITS`] leaves above `28.4 u` (`3.6 u`, about
+//! `2^-22`) for fewer than `2^36` lights (the cut passes at most 1,024,
+//! whose additions take under `2^-48 E`). So the bound is the one above,
+//! and the range conditions are the same, every block's.
 
 use glam::{DVec3, Vec3};
 
