@@ -235,7 +235,7 @@ pub trait Shader {
 
     /// [`sum_lanes_coarse`](Self::sum_lanes_coarse) of a whole small
     /// scene in one call: the `count` lights that `lanes` hold side by side
-    /// (as there, but any number of them; the cut passes at most 1,024), with
+    /// (as there, but more of them; the cut passes at most 1,024), with
     /// a certified bound on the error of the sum: `Some((sum, error))` with
     /// `|sum - exact| <= error` per channel, or `None`. The cut calls it
     /// first where it sums a whole small scene, and keeps the result on the

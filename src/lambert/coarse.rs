@@ -230,6 +230,10 @@ pub(crate) fn sum_baseline(
 /// scenes"): eight groups of eight lanes.
 const BLOCK_GROUPS: usize = COARSE_MAX / LANES;
 
+/// A whole scene's sum takes fewer lights than this (module docs, "Whole
+/// scenes"): `2^36`.
+const SCENE_LIGHTS_LIMIT: u64 = 1 << 36;
+
 /// A whole scene's lane sums, per channel and the envelope's, carried in
 /// `f64` from block to block (module docs, "Whole scenes").
 type Wide = [[f64; LANES]; 4];
@@ -259,15 +263,15 @@ fn finish_wide(
 /// The sum of a whole scene of `count` lights side by side in `lanes`
 /// (light `i` in lane `i % 8` of `lanes[i / 8]`) and its bound, in blocks
 /// of [`COARSE_MAX`] lights (module docs, "Whole scenes"); `None` for more
-/// lights than the lanes hold, a point that is not an `f32` value, or
-/// lights out of range.
+/// lights than the lanes hold (or `2^36` or more), a point that is not an
+/// `f32` value, or lights out of range.
 pub(crate) fn sum_scene_lanes_baseline(
     kd: DVec3,
     surface: &Surface,
     lanes: &[LightLanes],
     count: usize,
 ) -> Option<(DVec3, DVec3)> {
-    if count > lanes.len() * LANES {
+    if count > lanes.len() * LANES || count as u64 >= SCENE_LIGHTS_LIMIT {
         return None;
     }
     let frame = Frame::new(surface)?;
@@ -606,7 +610,7 @@ pub(crate) fn sum_scene_lanes_avx2(
         _mm_add_pd, _mm_cvtsd_f64, _mm_unpackhi_pd, _mm256_castpd256_pd128, _mm256_extractf128_pd,
         _mm256_hadd_pd, _mm256_movemask_ps, _mm256_setzero_pd,
     };
-    if count > lanes.len() * LANES {
+    if count > lanes.len() * LANES || count as u64 >= SCENE_LIGHTS_LIMIT {
         return None;
     }
     let frame = Frame::new(surface)?;
