@@ -1042,9 +1042,9 @@ const TINY_SCENE_LIGHTS: usize = 192;
 /// * when the shading point lies in the root's ball, which has then no
 ///   bound: the cut would count the root, find it unbounded and sum the
 ///   whole scene. This is that sum, so the same bits and counts.
-/// * for a scene of at most [`COARSE_LIGHTS_MAX`] lights (one coarse
-///   sum), wherever the point lies: where the cut would bound the root
-///   first, setting it up costs more than the sum. The root is counted as
+/// * for a scene of at most [`TINY_SCENE_LIGHTS`] lights ([`tiny_scene`]),
+///   wherever the point lies: where the cut would bound the root first,
+///   setting it up costs more than the sum. The root is counted as
 ///   evaluated, and a host's cut that is told the root is visible sums the
 ///   scene the same way ([`Cut::sums_tiny_scene`]), so that it gets these
 ///   bits.
