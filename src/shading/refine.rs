@@ -624,8 +624,19 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     );
                     return;
                 }
-                for lights in tree.lights[range].chunks(COARSE_LIGHTS_MAX) {
-                    self.sum_seen_coarse(lights, share, weight);
+                // Each chunk's lights start loading while the one before
+                // is summed (the first's mostly did when the cut took
+                // them, see `refine`).
+                let lights = &tree.lights[range];
+                let mut chunks = lights.chunks(COARSE_LIGHTS_MAX).peekable();
+                if let Some(first) = chunks.peek() {
+                    tree.prefetch_lights(first);
+                }
+                while let Some(chunk) = chunks.next() {
+                    if let Some(next) = chunks.peek() {
+                        tree.prefetch_lights(next);
+                    }
+                    self.sum_seen_coarse(chunk, share, weight);
                 }
                 return;
             }
@@ -810,6 +821,9 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                     self.sum_lights(lights, Seen::Visible, weight);
                     continue;
                 }
+                // The lights start loading now; they are summed with their
+                // neighbours' once the run ends.
+                tree.prefetch_lights(&tree.lights[lights.clone()]);
                 match &mut summing {
                     Some(run)
                         if run.end == lights.start

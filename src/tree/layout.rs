@@ -359,6 +359,19 @@ impl LightTree {
             }
         }
     }
+
+    /// Asks the processor to start loading `lights`, a run of this tree's
+    /// lights that the cut is about to sum (its first
+    /// [`PREFETCH_RUN_LINES`] cache lines), in trees large enough to leave
+    /// the caches (see [`PREFETCH_MIN_NODES`]). A run's lines are then
+    /// requested together rather than as the processor's own prefetcher
+    /// finds the run.
+    #[inline]
+    pub(crate) fn prefetch_lights(&self, lights: &[PointLight]) {
+        if self.nodes.len() >= PREFETCH_MIN_NODES {
+            prefetch_lines(as_bytes_range(lights), PREFETCH_RUN_LINES);
+        }
+    }
 }
 
 /// The address range of a slice.
@@ -381,6 +394,15 @@ const PREFETCH_MIN_NODES: usize = 2048;
 /// bound).
 const HOT_NODE_BYTES: usize = 52;
 
+/// Cache lines of a run of lights prefetched at most per call: the 64
+/// lights a coarse sum takes at most (1,536 bytes) wherever they start.
+/// Measured on the street city of 10^6 lights at a certified 1%, each
+/// point after 24 MB of other reads (caches cold), against no prefetch of
+/// the runs: 0.95x the time per point (median of 15 alternating pairs of
+/// runs), the same within noise with the tree warm in the caches and at
+/// 10^5 lights.
+const PREFETCH_RUN_LINES: usize = 25;
+
 /// Cache lines prefetched at most per call.
 const PREFETCH_LINES: usize = 16;
 
@@ -389,8 +411,15 @@ const PREFETCH_LINES: usize = 16;
 /// reads no memory the program can observe and never faults.
 #[inline]
 pub(super) fn prefetch(range: core::ops::Range<usize>) {
+    prefetch_lines(range, PREFETCH_LINES);
+}
+
+/// Prefetches the cache lines of an address range, at most `most` of
+/// them, into every cache level.
+#[inline]
+fn prefetch_lines(range: core::ops::Range<usize>, most: usize) {
     let mut line = range.start & !63;
-    let end = range.end.min(range.start + PREFETCH_LINES * 64);
+    let end = range.end.min(range.start + most * 64);
     while line < end {
         prefetch_line(line);
         line += 64;
