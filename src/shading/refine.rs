@@ -254,9 +254,10 @@ impl<'a, S: Shader, V: Visibility> Cut<'a, S, V> {
                 outcome.stop = Stop::Budget;
                 break;
             }
-            if refining {
-                // Only refinements place the interpolation level; asking the
-                // host changes what an entry counts for, not the level.
+            if refining && threshold.interpolation().is_some() {
+                // Only refinements place the interpolation level (which only
+                // an interpolating threshold reads); asking the host changes
+                // what an entry counts for, not the level.
                 let before = threshold.excess(sums.0, reported_bound(sums.1), largest);
                 outcome.last_step = Some((before, top.key));
             }
