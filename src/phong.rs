@@ -46,7 +46,7 @@ const LOBE_LOG_SPACE_BELOW: f64 = 1e-280;
 /// about `1.3e-12`, and an integer exponent up to 512 takes the power by
 /// repeated multiplication, at most `e - 1` roundings more (`5.7e-14` at
 /// 512; other exponents take `exp(e ln cos)`). Above
-/// ([`PHONG_SINE_ROUTE_ABOVE`](crate::numeric::PHONG_SINE_ROUTE_ABOVE)),
+/// ([`PHONG_SINE_ROUTE_ABOVE`]),
 /// lights near the axis take `1 - cos = sin^2 / (1 + cos)` from a
 /// compensated cross product, which makes the lobe's relative error about
 /// `|e ln cos|` times 30 ulps: every lobe that does not underflow is within

@@ -71,7 +71,7 @@ impl NodeEstimate {
 /// A reflectance model with a bound for groups of lights.
 ///
 /// An implementation gives the exact contribution of one point light and a
-/// certified [`NodeEstimate`] for a whole node of the [`LightTree`](crate::LightTree)
+/// certified [`NodeEstimate`] for a whole node of the [`LightTree`]
 /// from the node's stored data alone. The crate's cut (see
 /// [`Shading`](crate::Shading)) refines nodes until the bounds meet the
 /// requested threshold, and is only as certified as the bounds: a custom

@@ -1,4 +1,4 @@
-//! [`Lambert`]'s sum of visible lights in `f32`, eight lights side by side,
+//! [`Lambert`](crate::Lambert)'s sum of visible lights in `f32`, eight lights side by side,
 //! with a certified bound on its error (see
 //! [`Shader::sum_lights_coarse`](crate::Shader::sum_lights_coarse)).
 //!

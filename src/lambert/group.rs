@@ -1,4 +1,4 @@
-//! The children of a node bounded together in `f32`: [`Lambert`]'s
+//! The children of a node bounded together in `f32`: [`Lambert`](crate::Lambert)'s
 //! multipole series bound (with the paper's and the box's intervals) for
 //! eight nodes at once, from the rows of the tree's node groups, in one
 //! AVX2 vector per quantity.
@@ -7,7 +7,7 @@
 //! `I_k kd_k / D^2` for a node of intensity `I_k` at distance `D` (or of
 //! `D` for lengths), so that the ranges of `f32` hold whatever the scene's
 //! scale; the last step multiplies by `I_k kd_k / D^2` in `f64`. The
-//! formulas are those of [`Lambert`]'s docs; what follows is how each is
+//! formulas are those of [`Lambert`](crate::Lambert)'s docs; what follows is how each is
 //! widened for `f32` rounding, so that the interval still contains the
 //! exact value.
 //!

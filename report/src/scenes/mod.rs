@@ -11,10 +11,10 @@
 //! * [`City`]: a night city of box buildings with street lamps and lit
 //!   windows (the `city` and `shadows` examples), and [`city_shadows`], its
 //!   shading points on streets and façades (the report's occluded scene).
-//! * [`canopy`]: lights above a layer of many small leaves, points on the
+//! * [`canopy()`]: lights above a layer of many small leaves, points on the
 //!   ground below (the report's occluded scene where classification fails).
-//! * [`chandelier`]: a dense cluster of lights over a floor.
-//! * [`strings`], [`specular`], [`Glossy`]: strings of lights, over a
+//! * [`chandelier()`]: a dense cluster of lights over a floor.
+//! * [`strings()`], [`specular`], [`Glossy`]: strings of lights, over a
 //!   diffuse ground, a glossy floor, and a glossy floor with spheres.
 //! * [`ground_lights`], [`ground_points`]: lights 4 to 6 units above a
 //!   1000 x 1000 ground, points on it (the evaluations-per-point table).
