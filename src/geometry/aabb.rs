@@ -66,8 +66,7 @@ impl Aabb {
 
     /// Smallest and largest distance from `origin` to a point of the box
     /// (the smallest is 0 when `origin` is inside), widened outward by
-    /// [`DISTANCE_SLACK`] for their `f64`
-    /// rounding.
+    /// [`DISTANCE_SLACK`] for their `f64` rounding.
     #[must_use]
     pub fn distance_range(&self, origin: DVec3) -> (f64, f64) {
         let (min, max) = (self.min.as_dvec3(), self.max.as_dvec3());

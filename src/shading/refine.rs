@@ -76,7 +76,7 @@ pub(crate) struct Outcome {
     pub(crate) stop: Stop,
     /// The excess over the target before, and the key of, the last
     /// refinement: they place the interpolation level between the last two
-    /// steps.
+    /// steps (`None` for a threshold that does not interpolate).
     pub(crate) last_step: Option<(f64, f64)>,
     /// With nesting, the certified sums that confirmed the stop, if the
     /// threshold stopped the loop.
