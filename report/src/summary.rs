@@ -114,6 +114,40 @@ pub fn summary(records: &[Record], scaling: &[ScalingRow], targets: &[(&str, Pai
                 row.alternating.rounds
             );
         }
+        // The tree's time per point at the largest size against 10^4
+        // lights, and per evaluation at the largest size, both from the
+        // alternating passes.
+        if let Some(small) = scaling.iter().find(|r| r.lights == 10_000)
+            && largest.lights > small.lights
+        {
+            let _ = writeln!(
+                s,
+                "| time per point of the tree at t = {SCALING_RELATIVE}, city {} lights against {} \
+                 lights, alternating passes | {:.1}x ({:.2} against {:.2} us) |",
+                largest.lights,
+                small.lights,
+                largest.alternating.second / small.alternating.second,
+                largest.alternating.second * 1e6,
+                small.alternating.second * 1e6
+            );
+        }
+        let relative = format!("t={SCALING_RELATIVE}");
+        if let Some(cut) = largest
+            .records
+            .iter()
+            .find(|r| r.method == Method::TreeRelative && r.parameter == relative)
+            .filter(|r| r.measurement.mean_cost > 0.0)
+        {
+            let evaluations = cut.measurement.mean_cost;
+            let _ = writeln!(
+                s,
+                "| time per evaluation of the tree at t = {SCALING_RELATIVE}, city {} lights, \
+                 alternating passes | {:.1} ns ({:.0} evaluations per point) |",
+                largest.lights,
+                largest.alternating.second * 1e9 / evaluations,
+                evaluations
+            );
+        }
         let _ = writeln!(
             s,
             "| vectorized exact sum, city {} lights | {:.1} us per point |",
