@@ -1,5 +1,5 @@
-//! [`Lambert`](crate::Lambert)'s sum of visible lights in `f32`, eight lights side by side,
-//! with a certified bound on its error (see
+//! [`Lambert`](crate::Lambert)'s sum of visible lights in `f32`, eight
+//! lights side by side, with a certified bound on its error (see
 //! [`Shader::sum_lights_coarse`](crate::Shader::sum_lights_coarse)).
 //!
 //! # The rounding

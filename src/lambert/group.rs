@@ -1,15 +1,15 @@
-//! The children of a node bounded together in `f32`: [`Lambert`](crate::Lambert)'s
-//! multipole series bound (with the paper's and the box's intervals) for
-//! eight nodes at once, from the rows of the tree's node groups, in one
-//! AVX2 vector per quantity.
+//! The children of a node bounded together in `f32`:
+//! [`Lambert`](crate::Lambert)'s multipole series bound (with the paper's
+//! and the box's intervals) for eight nodes at once, from the rows of the
+//! tree's node groups, in one AVX2 vector per quantity.
 //!
 //! Every quantity before the last step is dimensionless, in units of
 //! `I_k kd_k / D^2` for a node of intensity `I_k` at distance `D` (or of
 //! `D` for lengths), so that the ranges of `f32` hold whatever the scene's
 //! scale; the last step multiplies by `I_k kd_k / D^2` in `f64`. The
-//! formulas are those of [`Lambert`](crate::Lambert)'s docs; what follows is how each is
-//! widened for `f32` rounding, so that the interval still contains the
-//! exact value.
+//! formulas are those of [`Lambert`](crate::Lambert)'s docs; what follows
+//! is how each is widened for `f32` rounding, so that the interval still
+//! contains the exact value.
 //!
 //! # Rounding
 //!
