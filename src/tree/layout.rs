@@ -52,9 +52,9 @@ use crate::geometry::{Aabb, Cone};
 /// [`refit`](LightTree::refit) recomputes them all.
 #[derive(Clone, Copy, Debug, PartialEq)]
 // In this order: what the cut reads of every node entering it (intensity,
-// radius, counts and ranges, the moments' rounding bound) in its first 52
-// bytes, which lie in one or two cache lines; the statistics that the
-// children's blocks copy (see `groups`) after them.
+// radius, counts and ranges, the moments' rounding bound, the centroid) in
+// its first 60 bytes, which lie in one or two cache lines; the statistics
+// that the children's blocks copy (see `groups`) after them.
 #[repr(C)]
 pub struct Node {
     pub(crate) intensity: DVec3,
@@ -64,8 +64,8 @@ pub struct Node {
     pub(crate) first_child: u32,
     pub(crate) child_count: u32,
     pub(crate) moment_error: f32,
-    pub(crate) weight: f32,
     pub(crate) centroid: Vec3,
+    pub(crate) weight: f32,
     pub(crate) aabb: Aabb,
     pub(crate) channel_offsets: [Vec3; 3],
     /// Per channel: xx, yy, zz, xy, xz, yz.
@@ -391,8 +391,12 @@ const PREFETCH_MIN_NODES: usize = 2048;
 
 /// The first bytes of a [`Node`], which hold what the cut reads of a node
 /// entering it (intensity, radius, counts, ranges, the moments' rounding
-/// bound).
-const HOT_NODE_BYTES: usize = 52;
+/// bound, and the centroid, which tells whether a near node is summed
+/// whole). Until the centroid was among them a cold child's record often
+/// missed the cache a second time; with it, on the street city of 10^6
+/// lights at a certified 1%, each point after an exact sum over the scene
+/// took 0.99x the time (median of 16 alternating pairs of runs).
+const HOT_NODE_BYTES: usize = core::mem::offset_of!(Node, weight);
 
 /// Cache lines of a run of lights prefetched at most per call: the 64
 /// lights a coarse sum takes at most (1,536 bytes) wherever they start.
@@ -454,4 +458,33 @@ fn prefetch_line(address: usize) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = address;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::mem::{offset_of, size_of};
+
+    #[test]
+    fn the_hot_bytes_hold_what_the_cut_reads_first() {
+        let ends = [
+            offset_of!(Node, intensity) + size_of::<DVec3>(),
+            offset_of!(Node, radius) + size_of::<f32>(),
+            offset_of!(Node, light_count) + size_of::<u32>(),
+            offset_of!(Node, first_light) + size_of::<u32>(),
+            offset_of!(Node, first_child) + size_of::<u32>(),
+            offset_of!(Node, child_count) + size_of::<u32>(),
+            offset_of!(Node, moment_error) + size_of::<f32>(),
+            offset_of!(Node, centroid) + size_of::<Vec3>(),
+        ];
+        assert!(ends.iter().all(|&end| end <= HOT_NODE_BYTES));
+        // Records start 8-byte aligned (and so at most 56 bytes into a
+        // line), so hot bytes of at most 72 span at most two lines: those
+        // of their first and last bytes, which `prefetch_refinement` asks
+        // for.
+        assert_eq!(core::mem::align_of::<Node>() % 8, 0);
+        assert_eq!(size_of::<Node>() % 8, 0);
+        let (first, last) = (56, 56 + HOT_NODE_BYTES - 1);
+        assert!(last / 64 - first / 64 <= 1, "{HOT_NODE_BYTES}");
+    }
 }
