@@ -15,9 +15,11 @@
 //!   [`occluded`] for the night city with shadows and the canopy,
 //!   [`scaling`]), [`plot`], [`csv`], [`summary`], the
 //!   ground scene's evaluations-per-point table ([`evaluations`]), the
-//!   Lambert bounds on the coloured street city ([`bounds`]) and batch
-//!   shading of a camera view ([`batch`]).
+//!   Lambert bounds on the coloured street city ([`bounds`]), batch
+//!   shading of a camera view ([`batch`]) and where a certified cut's work
+//!   goes ([`anatomy`]).
 
+pub mod anatomy;
 pub mod batch;
 pub mod bounds;
 pub mod bvh;

@@ -8,6 +8,7 @@
 //! cargo run --release -p manylights-report -- batch           # batch shading of a camera view
 //! cargo run --release -p manylights-report -- shadows         # the occluded scenes alone
 //! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
+//! cargo run --release -p manylights-report -- anatomy         # where a cut's work goes
 //! ```
 //!
 //! The full report takes about a minute on 2 cores, plus about two minutes
@@ -21,7 +22,11 @@
 //! scanline), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
 //! `city-shadows` and `canopy` (the occluded scenes; `shadows` names both)
-//! and `scaling` (time against number of lights); no part named means all.
+//! and `scaling` (time against number of lights); no part named means all
+//! of these. `anatomy` (where a certified cut's work goes on the street
+//! city at 10^4 to 10^6 lights: refinements, bounded children by depth and
+//! distance, the final entries' errors and how loose their bounds are)
+//! runs only when named.
 //! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
 //! repository root:
 //!
@@ -45,6 +50,7 @@ use std::fs;
 use std::path::Path;
 use std::time::Instant;
 
+use manylights_report::anatomy::print_anatomy;
 use manylights_report::batch::{BATCH, FULL_BATCH, QUICK_BATCH, run_batch};
 use manylights_report::bounds::print_bounds_table;
 use manylights_report::config::{
@@ -66,6 +72,8 @@ use manylights_report::sweep::run_scene;
 const EVALUATIONS: &str = "evaluations";
 /// The Lambert bounds on the coloured street city, as a part.
 const BOUNDS: &str = "bounds";
+/// Where a certified cut's work goes, as a part run only when named.
+const ANATOMY: &str = "anatomy";
 
 fn main() -> Result<(), Box<dyn Error>> {
     let started = Instant::now();
@@ -83,14 +91,15 @@ fn main() -> Result<(), Box<dyn Error>> {
             SHADOWS => parts.extend(OCCLUDED_NAMES.map(String::from)),
             name if SCENE_NAMES.contains(&name)
                 || OCCLUDED_NAMES.contains(&name)
-                || [EVALUATIONS, BOUNDS, BATCH, SCALING].contains(&name) =>
+                || [EVALUATIONS, BOUNDS, BATCH, SCALING, ANATOMY].contains(&name) =>
             {
                 parts.push(arg)
             }
             _ => {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
-                     [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {SHADOWS} | {SCALING}]...",
+                     [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {SHADOWS} | {SCALING} | \
+                     {ANATOMY}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -98,7 +107,8 @@ fn main() -> Result<(), Box<dyn Error>> {
             }
         }
     }
-    let wanted = |part: &str| parts.is_empty() || parts.iter().any(|p| p == part);
+    let named = |part: &str| parts.iter().any(|p| p == part);
+    let wanted = |part: &str| parts.is_empty() || named(part);
     let mut cfg = if quick { QUICK } else { FULL };
     if let Some(n) = shadow_lights {
         cfg.shadow_lights = n;
@@ -119,6 +129,12 @@ fn main() -> Result<(), Box<dyn Error>> {
     }
     if wanted(BATCH) {
         run_batch(if quick { QUICK_BATCH } else { FULL_BATCH }, &out)?;
+    }
+    if named(ANATOMY) {
+        print_anatomy()?;
+        if parts.iter().all(|p| p == ANATOMY) {
+            return Ok(());
+        }
     }
     println!("{METHODS}");
     println!(
