@@ -164,8 +164,6 @@ struct Depth {
 /// What the recorder saw over every point of one size, summed over the
 /// points (divide by `points`).
 pub struct Anatomy {
-    /// Lights in the scene.
-    pub lights: usize,
     /// Depth of the tree.
     pub depth: usize,
     /// Points with a positive radiance, over which the sums are taken.
@@ -296,7 +294,6 @@ pub fn anatomy(n: usize, points: usize) -> Result<Anatomy, Box<dyn Error>> {
     }
     looseness.sort_by(f64::total_cmp);
     Ok(Anatomy {
-        lights: n,
         depth: tree.depth() as usize,
         points: lit,
         refinements,
