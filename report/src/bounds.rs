@@ -19,6 +19,7 @@ use rand::RngExt;
 
 use crate::config::{SEED, build_repeats};
 use crate::exact::SoaLights;
+use crate::measure::minor_faults;
 use crate::scenes::{city, rng};
 use crate::sweep::median;
 
@@ -119,7 +120,11 @@ const BUILD_SIZES: [usize; 4] = [10_000, 100_000, 1_000_000, 10_000_000];
 /// (`build_parallel`, the same tree; not timed when the pool has one
 /// thread) and as many rebuilds on
 /// one thread of a tree of the same lights in the memory it holds
-/// (`rebuild`, the same tree again), the memory and the nodes per light.
+/// (`rebuild`, the same tree again), the memory and the nodes per light,
+/// and the page faults the process took per 1,000 lights in the one-thread
+/// builds and the rebuilds (medians; `-` outside Linux): a build in memory
+/// the allocator hands back to the system pays for first touches of fresh
+/// pages, which a rebuild in place does not.
 fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
     // With one thread in rayon's pool (a process pinned to one core) the
     // pool's builds are those of one thread again: not timed.
@@ -131,19 +136,23 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
         "build / light, pool (one thread here: not timed) | one / pool".to_string()
     };
     println!(
-        "| lights | first build / light | build / light, one thread | {pool_column} | rebuild in place / light, one thread | build / rebuild | memory / light (lights included) | nodes / light |"
+        "| lights | first build / light | build / light, one thread | {pool_column} | rebuild in place / light, one thread | build / rebuild | page faults / 1000 lights, build / rebuild | memory / light (lights included) | nodes / light |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for (k, count) in BUILD_SIZES.into_iter().enumerate() {
         let lights = coloured(&crate::scenes::city_lights(count, SEED), SEED ^ 0x7147);
         let (mut one, mut pool, mut again) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut one_faults, mut again_faults) = (Vec::new(), Vec::new());
+        let faults = |before: Option<u64>| Some(minor_faults()?.saturating_sub(before?) as f64);
         let mut size = (0, 0);
         // Rebuilt over and over, as a renderer would each frame.
         let mut kept = LightTree::build(&lights)?;
         for _ in 0..build_repeats(count) {
+            let before = minor_faults();
             let start = Instant::now();
             let tree = LightTree::build(&lights)?;
             one.push(start.elapsed().as_secs_f64());
+            one_faults.extend(faults(before));
             size = (tree.memory_bytes(), tree.nodes().len());
             drop(tree);
             if pooled {
@@ -152,9 +161,11 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
                 pool.push(start.elapsed().as_secs_f64());
                 drop(tree);
             }
+            let before = minor_faults();
             let start = Instant::now();
             kept.rebuild(&lights)?;
             again.push(start.elapsed().as_secs_f64());
+            again_faults.extend(faults(before));
         }
         drop(kept);
         let (one, again) = (median(one), median(again));
@@ -168,8 +179,18 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
         } else {
             "- | -".to_string()
         };
+        let faults = if one_faults.is_empty() || again_faults.is_empty() {
+            "- / -".to_string()
+        } else {
+            let per_thousand = |f: Vec<f64>| median(f) * 1e3 / count as f64;
+            format!(
+                "{:.1} / {:.1}",
+                per_thousand(one_faults),
+                per_thousand(again_faults)
+            )
+        };
         println!(
-            "| {count} | {first} | {:.0} ns | {pool} | {:.0} ns | {:.2}x | {:.0} B | {:.2} |",
+            "| {count} | {first} | {:.0} ns | {pool} | {:.0} ns | {:.2}x | {faults} | {:.0} B | {:.2} |",
             per_light(one),
             per_light(again),
             one / again,
