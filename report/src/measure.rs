@@ -347,8 +347,8 @@ mod tests {
         }
         std::hint::black_box(&memory);
         let after = minor_faults().expect("Linux has /proc/self/stat");
-        // Huge pages would take fewer faults; at least one in any case.
-        assert!(after > before, "{before} -> {after}");
-        assert!(after - before <= 2 * pages as u64, "{before} -> {after}");
+        // At least one fault per 2 MiB even with huge pages. (Other tests'
+        // threads may add theirs: the count is the whole process's.)
+        assert!(after >= before + pages as u64 / 512, "{before} -> {after}");
     }
 }
