@@ -143,7 +143,8 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
         let lights = coloured(&crate::scenes::city_lights(count, SEED), SEED ^ 0x7147);
         let (mut one, mut pool, mut again) = (Vec::new(), Vec::new(), Vec::new());
         let (mut one_faults, mut again_faults) = (Vec::new(), Vec::new());
-        let faults = |before: Option<u64>| Some(minor_faults()?.saturating_sub(before?) as f64);
+        let faults_since =
+            |before: Option<u64>| Some(minor_faults()?.saturating_sub(before?) as f64);
         let mut size = (0, 0);
         // Rebuilt over and over, as a renderer would each frame.
         let mut kept = LightTree::build(&lights)?;
@@ -152,7 +153,7 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
             let start = Instant::now();
             let tree = LightTree::build(&lights)?;
             one.push(start.elapsed().as_secs_f64());
-            one_faults.extend(faults(before));
+            one_faults.extend(faults_since(before));
             size = (tree.memory_bytes(), tree.nodes().len());
             drop(tree);
             if pooled {
@@ -165,7 +166,7 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
             let start = Instant::now();
             kept.rebuild(&lights)?;
             again.push(start.elapsed().as_secs_f64());
-            again_faults.extend(faults(before));
+            again_faults.extend(faults_since(before));
         }
         drop(kept);
         let (one, again) = (median(one), median(again));
