@@ -36,6 +36,53 @@ macro_rules! detected {
     }};
 }
 
+/// Runs `f`, compiled for AVX2 where the processor has it: the one way the
+/// crate's hot paths (a point's cut, a group's cut, the build's passes)
+/// get their AVX2 copy. `f` is called once from a function compiled with
+/// AVX2 enabled; a closure called once from one place is inlined there, and
+/// the `#[inline(always)]` code it calls with it, so the whole of it is
+/// compiled again for AVX2 (the same operations, so the same bits).
+#[inline(always)]
+pub(crate) fn with_avx2<T>(f: impl FnOnce() -> T) -> T {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if avx2() {
+            // SAFETY: the processor has AVX2 (`avx2` checked).
+            #[allow(unsafe_code)]
+            return unsafe { run_avx2(f) };
+        }
+    }
+    f()
+}
+
+/// [`with_avx2`]'s copy compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn run_avx2<T>(f: impl FnOnce() -> T) -> T {
+    f()
+}
+
+/// [`with_avx2`] for the copies that also use fused multiply-adds.
+#[inline(always)]
+pub(crate) fn with_avx2_fma<T>(f: impl FnOnce() -> T) -> T {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if avx2_fma() {
+            // SAFETY: the processor has AVX2 and FMA (`avx2_fma` checked).
+            #[allow(unsafe_code)]
+            return unsafe { run_avx2_fma(f) };
+        }
+    }
+    f()
+}
+
+/// [`with_avx2_fma`]'s copy compiled for AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn run_avx2_fma<T>(f: impl FnOnce() -> T) -> T {
+    f()
+}
+
 /// Whether the copies compiled for AVX2 may run.
 #[inline]
 pub(crate) fn avx2() -> bool {

@@ -120,7 +120,7 @@
 //! plane; on or behind the Phong lobe's border, also for `e = 0`, where the
 //! model is discontinuous), because its sign is decided exactly. Phong at
 //! the lobe's border is evaluated exactly, not given a wider allowance. With
-//! the default [`BoundKind::Tight`], a node whose box lies at or below the
+//! the default [`BoundKind::Series`], a node whose box lies at or below the
 //! tangent plane is settled as exactly 0 by an exact test, so lights
 //! exactly in the tangent plane cost a few evaluations, not a walk of the
 //! tree. A Lambert term is within `2^-40` (about `9e-13`) relative, within
@@ -168,6 +168,7 @@
 
 #![deny(unsafe_code)]
 
+mod cut;
 mod dispatch;
 mod error;
 mod geometry;
@@ -189,9 +190,8 @@ pub use lambert::{BoundKind, Lambert};
 pub use light::{LightLanes, PointLight};
 pub use phong::{Mirror, Phong};
 pub use shader::{Combined, NodeEstimate, Shader, ViewIndependent};
-pub use shading::{
-    Accepts, BatchStats, NoView, Query, ShadeResult, Shading, Stop, Target, Threshold, WithView,
-};
+pub use cut::{ShadeResult, Stop, Target, Threshold};
+pub use shading::{Accepts, BatchStats, NoView, Query, Shading, WithView};
 pub use tree::{LightTree, Node, TreeBuilder};
 pub use visibility::{Coverage, NodeRegion, PointGroup, Unoccluded, Visibility};
 

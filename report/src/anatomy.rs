@@ -6,9 +6,11 @@
 //! exactly.
 //!
 //! It watches the cut from outside, through a [`Shader`] that forwards
-//! every call to [`Lambert`] and records the children it bounds
-//! ([`Shader::bound_children_coarse`], the call the cut makes at this
-//! target) and the lights it sums. A bounded node stays in the final cut
+//! every call of the public trait to [`Lambert`] and records the children
+//! it bounds ([`Shader::bound_nodes`]) and the lights it sums
+//! ([`Shader::eval_lights`]). Such a shader gets the cut a custom shader
+//! gets: `f64` bounds and sums, without `Lambert`'s coarse `f32` lanes, so
+//! it refines a little more than `Lambert` itself. A bounded node stays in the final cut
 //! unless the cut later bounds its children or sums lights of its own;
 //! nodes left exactly 0 are not seen, so the entries' errors fall a little
 //! short of the reported bound or, where a node's children were all
@@ -21,7 +23,7 @@ use std::error::Error;
 
 use glam::{DVec3, Vec3};
 use manylights::{
-    BoundKind, Cone, Lambert, LightLanes, LightTree, Node, NodeEstimate, PointLight, Shader,
+    BoundKind, Cone, Lambert, LightTree, Node, NodeEstimate, PointLight, Shader,
     Surface, Threshold, Unoccluded,
 };
 
@@ -53,10 +55,20 @@ struct Recorder {
     /// Address of the tree's first light, to turn summed slices into
     /// ranges.
     base: usize,
+    /// Address of the tree's first node, to turn bounded nodes into
+    /// indices.
+    nodes: usize,
+    /// Each node's parent (the root's is 0).
+    parent: Vec<usize>,
     seen: RefCell<Seen>,
 }
 
 impl Recorder {
+    /// The index of `node` in the tree's nodes.
+    fn index_of(&self, node: &Node) -> usize {
+        (node as *const Node as usize - self.nodes) / size_of::<Node>()
+    }
+
     fn range_of(&self, lights: &[PointLight]) -> (usize, usize) {
         let start = (lights.as_ptr() as usize - self.base) / size_of::<PointLight>();
         (start, start + lights.len())
@@ -76,63 +88,8 @@ impl Shader for Recorder {
         self.inner.bound(p, surface, node, cone)
     }
     fn eval_lights(&self, p: &(), surface: &Surface, lights: &[PointLight], out: &mut [DVec3]) {
+        self.seen.borrow_mut().summed.push(self.range_of(lights));
         self.inner.eval_lights(p, surface, lights, out)
-    }
-    fn sum_lights(&self, p: &(), surface: &Surface, lights: &[PointLight]) -> DVec3 {
-        self.seen.borrow_mut().summed.push(self.range_of(lights));
-        self.inner.sum_lights(p, surface, lights)
-    }
-    fn sum_lights_coarse(
-        &self,
-        p: &(),
-        surface: &Surface,
-        lights: &[PointLight],
-    ) -> Option<(DVec3, DVec3)> {
-        self.seen.borrow_mut().summed.push(self.range_of(lights));
-        self.inner.sum_lights_coarse(p, surface, lights)
-    }
-    fn sum_lanes_coarse(
-        &self,
-        p: &(),
-        surface: &Surface,
-        lanes: &[LightLanes],
-        count: usize,
-    ) -> Option<(DVec3, DVec3)> {
-        self.inner.sum_lanes_coarse(p, surface, lanes, count)
-    }
-    fn sum_scene_coarse(
-        &self,
-        p: &(),
-        surface: &Surface,
-        lanes: &[LightLanes],
-        count: usize,
-    ) -> Option<(DVec3, DVec3)> {
-        self.inner.sum_scene_coarse(p, surface, lanes, count)
-    }
-    fn bound_children_coarse(
-        &self,
-        p: &(),
-        surface: &Surface,
-        tree: &LightTree,
-        parent: usize,
-        wanted: u8,
-        out: &mut [Option<NodeEstimate>],
-    ) -> bool {
-        let done = self
-            .inner
-            .bound_children_coarse(p, surface, tree, parent, wanted, out);
-        if done {
-            let mut seen = self.seen.borrow_mut();
-            seen.parents.push(parent);
-            seen.children += wanted.count_ones() as usize;
-            let first = tree.nodes()[parent].children().start;
-            for (i, bound) in out.iter().enumerate() {
-                if let (true, Some(bound)) = (wanted & (1 << i) != 0, bound) {
-                    seen.bounded.push((first + i, *bound));
-                }
-            }
-        }
-        done
     }
     fn bound_nodes(
         &self,
@@ -142,10 +99,15 @@ impl Shader for Recorder {
         cones: &[Cone],
         out: &mut [NodeEstimate],
     ) {
-        self.inner.bound_nodes(p, surface, nodes, cones, out)
-    }
-    fn diffuse_albedo(&self) -> Option<DVec3> {
-        self.inner.diffuse_albedo()
+        self.inner.bound_nodes(p, surface, nodes, cones, out);
+        let mut seen = self.seen.borrow_mut();
+        if let Some(first) = nodes.first() {
+            seen.parents.push(self.parent[self.index_of(first)]);
+        }
+        seen.children += nodes.len();
+        for (node, bound) in nodes.iter().zip(out.iter()) {
+            seen.bounded.push((self.index_of(node), *bound));
+        }
     }
     fn horizon(&self, surface: &Surface) -> Option<Vec3> {
         self.inner.horizon(surface)
@@ -201,10 +163,18 @@ pub struct Anatomy {
 pub fn anatomy(n: usize, points: usize) -> Result<Anatomy, Box<dyn Error>> {
     let scene = scenes::city(n, points, SEED);
     let tree = LightTree::build(&scene.lights)?;
-    let shader = Lambert::new(scene.material.kd).with_bound(BoundKind::Tight);
+    let shader = Lambert::new(scene.material.kd).with_bound(BoundKind::Series);
+    let mut parent = vec![0usize; tree.nodes().len()];
+    for (i, node) in tree.nodes().iter().enumerate() {
+        for child in node.children() {
+            parent[child] = i;
+        }
+    }
     let recorder = Recorder {
         inner: shader,
         base: tree.lights().as_ptr() as usize,
+        nodes: tree.nodes().as_ptr() as usize,
+        parent,
         seen: RefCell::new(Seen::default()),
     };
     let mut shading = tree.shading(recorder);

@@ -30,12 +30,12 @@ const ROWS: [(&str, BoundKind, Threshold); 3] = [
     ),
     (
         "tight bound, certified 1%",
-        BoundKind::Tight,
+        BoundKind::Series,
         Threshold::relative(THRESHOLD),
     ),
     (
         "tight bound, per-node 1% (Lightcuts)",
-        BoundKind::Tight,
+        BoundKind::Series,
         Threshold::per_node(THRESHOLD),
     ),
 ];

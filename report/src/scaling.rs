@@ -63,7 +63,7 @@ fn alternate(
     };
     let rounds = rounds.clamp(5, 41) | 1;
     let threshold = Threshold::relative(SCALING_RELATIVE);
-    let mut shading = tree.shading(shader.with_bound(BoundKind::Tight));
+    let mut shading = tree.shading(shader.with_bound(BoundKind::Series));
     paired(
         bench.points.len(),
         rounds,
@@ -123,10 +123,10 @@ pub fn run_scaling(cfg: &Config) -> Result<Vec<ScalingRow>, Box<dyn Error>> {
         let m = cut(BoundKind::Paper, relative);
         record(Method::TreePaper, format!("t={SCALING_RELATIVE}"), m);
         for t in SCALING_SWEEP {
-            let m = cut(BoundKind::Tight, Threshold::relative(t));
+            let m = cut(BoundKind::Series, Threshold::relative(t));
             record(Method::TreeRelative, format!("t={t}"), m);
         }
-        let m = cut(BoundKind::Tight, Threshold::absolute(SCALING_ABSOLUTE));
+        let m = cut(BoundKind::Series, Threshold::absolute(SCALING_ABSOLUTE));
         record(Method::TreeAbsolute, format!("abs={SCALING_ABSOLUTE}"), m);
         drop(record);
         let alternating = alternate(&records, &tree, shader, &soa, &scene, bench);

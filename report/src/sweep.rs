@@ -308,7 +308,7 @@ fn sweep<S: Shader + Copy + Send + Sync>(
 ) -> Result<Vec<Record>, Box<dyn Error>> {
     let (tree, build) = build_tree(scene)?;
     print_header(scene, &tree, build);
-    let (points, refs) = references(&tree, make(BoundKind::Tight), &scene.points, |_| Unoccluded);
+    let (points, refs) = references(&tree, make(BoundKind::Series), &scene.points, |_| Unoccluded);
     let dropped = scene.points.len() - points.len();
     let median_radiance = median(refs.iter().map(|r| r.max_element()).collect());
     let soa = SoaLights::new(&scene.lights);
@@ -336,19 +336,19 @@ fn sweep<S: Shader + Copy + Send + Sync>(
         record(Method::TreePaper, format!("t={t}"), m);
     }
     for t in TREE_RELATIVE {
-        let m = cut(BoundKind::Tight, Threshold::relative(t));
+        let m = cut(BoundKind::Series, Threshold::relative(t));
         record(Method::TreeRelative, format!("t={t}"), m);
     }
     for f in TREE_ABSOLUTE {
-        let m = cut(BoundKind::Tight, Threshold::absolute(f * median_radiance));
+        let m = cut(BoundKind::Series, Threshold::absolute(f * median_radiance));
         record(Method::TreeAbsolute, absolute_parameter(f), m);
     }
     for t in PER_NODE {
-        let m = cut(BoundKind::Tight, Threshold::per_node(t));
+        let m = cut(BoundKind::Series, Threshold::per_node(t));
         record(Method::PerNode, format!("t={t}"), m);
     }
 
-    let shader = make(BoundKind::Tight);
+    let shader = make(BoundKind::Series);
     sample_sweeps(
         &mut record,
         &tree,

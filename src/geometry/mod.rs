@@ -3,8 +3,11 @@
 
 mod aabb;
 mod cone;
+mod group;
 mod surface;
 
 pub use aabb::Aabb;
 pub use cone::Cone;
+pub(crate) use group::{GroupBounds, Side};
+pub use group::GroupView;
 pub use surface::Surface;

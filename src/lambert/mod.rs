@@ -2,19 +2,21 @@
 
 use glam::{DVec3, Vec3};
 
+#[cfg(test)]
+mod bound_tests;
 mod coarse;
 mod group;
 mod series;
 
 use series::{Rgb, WidthInput, degree_two_lanes, rgb, series_width};
-pub(crate) use series::{SharedView, shared_width, shared_widths};
+mod shared;
 
-use crate::geometry::{Cone, Surface};
+use crate::geometry::{Cone, GroupView, Surface};
 use crate::lanes::{Lanes, Vec3Lanes, array};
 use crate::numeric::{
     COS_SLACK, NAIVE_DOT_ACCEPT, SECOND_ORDER_SLACK, SERIES_SLACK, dot_of_difference,
 };
-use crate::shader::{NodeEstimate, Shader, ViewIndependent, colour_or_clamped, try_colour};
+use crate::shader::{NodeEstimate, Seal, Shader, ViewIndependent, colour_or_clamped, try_colour};
 use crate::tree::groups::{Block, with_block};
 use crate::tree::{LightTree, Node};
 use crate::{LightLanes, PointLight, ShadeError};
@@ -28,20 +30,13 @@ pub enum BoundKind {
     Paper,
     /// The second-order Taylor bound: first-order colour correction in the
     /// estimate, Hessian bounds over the ball for the remainder, and the box
-    /// refinements (the crate's default up to 0.1's development).
+    /// refinements.
     Taylor,
     /// The dipole multipole series: the estimate sums the expansion through
     /// second order from per-channel moments, the remainder is bounded degree
     /// by degree from harmonic norms, with the box refinements.
     #[default]
     Series,
-}
-
-#[allow(non_upper_case_globals)]
-impl BoundKind {
-    /// The tightest bound the crate ships, currently
-    /// [`BoundKind::Series`].
-    pub const Tight: Self = Self::Series;
 }
 
 /// Diffuse reflection: a light of intensity `I` at distance `d` in direction
@@ -317,8 +312,19 @@ impl Shader for Lambert {
     /// Always `Some(kd)`, whichever [`BoundKind`]: shared cuts use their own
     /// bound (the series, enlarged over the group of points).
     #[inline]
-    fn diffuse_albedo(&self) -> Option<DVec3> {
+    fn diffuse_albedo(&self, _: Seal) -> Option<DVec3> {
         Some(self.kd)
+    }
+
+    /// The series width at the group's worst view ([`shared::errors`]).
+    #[inline(always)]
+    fn group_errors<const N: usize>(
+        &self,
+        _: Seal,
+        nodes: &[&Node; N],
+        views: &[GroupView; N],
+    ) -> Option<[DVec3; N]> {
+        Some(shared::errors::<N>(self.kd, nodes, views))
     }
 
     #[inline]
@@ -369,7 +375,7 @@ impl Shader for Lambert {
     /// `eval` accepts it); lights within about 0.1 degree of the tangent
     /// plane go through `eval` itself.
     #[inline]
-    fn sum_lights(&self, _: &(), surface: &Surface, lights: &[PointLight]) -> DVec3 {
+    fn sum_lights(&self, _: Seal, _: &(), surface: &Surface, lights: &[PointLight]) -> DVec3 {
         self.sum_group(surface, lights)
     }
 
@@ -383,6 +389,7 @@ impl Shader for Lambert {
     #[inline]
     fn sum_lights_coarse(
         &self,
+        _: Seal,
         _: &(),
         surface: &Surface,
         lights: &[PointLight],
@@ -398,6 +405,7 @@ impl Shader for Lambert {
     #[inline]
     fn sum_lanes_coarse(
         &self,
+        _: Seal,
         _: &(),
         surface: &Surface,
         lanes: &[LightLanes],
@@ -423,6 +431,7 @@ impl Shader for Lambert {
     #[inline]
     fn sum_scene_coarse(
         &self,
+        _: Seal,
         _: &(),
         surface: &Surface,
         lanes: &[LightLanes],
@@ -447,6 +456,7 @@ impl Shader for Lambert {
     #[inline]
     fn bound_children_coarse(
         &self,
+        _: Seal,
         _: &(),
         surface: &Surface,
         tree: &LightTree,

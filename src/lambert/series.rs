@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 
-use crate::lanes::{Lanes, Vec3Lanes, array};
+use crate::lanes::{Lanes, Vec3Lanes};
 use crate::numeric::{POINT_SLACK, SERIES_SLACK};
 use crate::tree::Node;
 
@@ -137,76 +137,6 @@ pub(super) fn degree_two_lanes<const N: usize>(
         *series = c0 + first + second * half_inv_d2;
     }
     series
-}
-
-/// What a group of shading points knows of a node's geometry for
-/// [`shared_width`], as upper bounds over every point `p` of the group and
-/// its exact unit normal `n`.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct SharedView {
-    /// `1 / D` for the smallest distance `D > R` from a point to the
-    /// node's centroid.
-    pub(crate) inv_nearest: f64,
-    /// `|c0| = |n . (c - p)| / |c - p|`, at most 1.
-    pub(crate) cosine: f64,
-    /// `|n . (x - c)|` over the node's box.
-    pub(crate) height: f64,
-    /// `|n - n0|` for the group's mean normal `n0` (how far `n` is from
-    /// what `height` was measured along).
-    pub(crate) tilt: f64,
-}
-
-/// The width of the series interval shared by every shading point of a
-/// group, per channel in units of `I_k / D^2` (`D` the group's nearest
-/// distance, [`SharedView`]): for each point `p`, the smooth sum (`g`
-/// unclamped) over the members of `node` lies within that width times
-/// `I_k kd_k / D^2` of `I_k kd_k / D_p^2` times the series through degree 2
-/// ([`degree_two_lanes`]) at `p`; where
-/// members lie below `p`'s tangent plane the exact sum exceeds the smooth
-/// one by at most the clamp term of [`Lambert`](super::Lambert)'s docs,
-/// which the caller adds.
-///
-/// Why it holds: the width of the series bound at `p` is a sum of terms
-/// that grow as `D_p` falls (`sigma = R / D_p`, `|o_k| / D_p`,
-/// `tr(S_k) / D_p^2`, the tail sums, `D_p / (D_p - R)`) and as `|c0|` and
-/// `hperp` grow, so it is largest at the smallest distance with the largest
-/// `|c0|` and `hperp`; `A_m^2 = c0^2 (m+1)^2 + nu^2 m (m+1) / 2` with
-/// `nu <= 1`; `|nperp . y| <= |n . y| + |c0| |uh . y|`,
-/// `|n . y| <= |n0 . y| + |n - n0| |y|` and `|y| <= R` give
-/// `hperp <= height + (tilt + |c0|) R`; and `I_k / D_p^2 <= I_k / D^2`.
-#[inline(always)]
-pub(crate) fn shared_width(node: &Node, view: &SharedView) -> DVec3 {
-    shared_widths::<1>(&[node], &[*view])[0]
-}
-
-/// [`shared_width`] for `N` nodes side by side, each lane through exactly
-/// the operations of one node alone (the same bits).
-#[inline(always)]
-pub(crate) fn shared_widths<const N: usize>(
-    nodes: &[&Node; N],
-    views: &[SharedView; N],
-) -> [DVec3; N] {
-    let mut input = WidthInput {
-        inv_d: Lanes::splat(0.0),
-        sigma: Lanes::splat(0.0),
-        inv_rho: Lanes::splat(0.0),
-        ac: Lanes::splat(0.0),
-        nu2: Lanes::splat(1.0),
-        hperp: Lanes::splat(0.0),
-    };
-    for (i, (node, view)) in nodes.iter().zip(views).enumerate() {
-        let inv_d = view.inv_nearest;
-        let radius = f64::from(node.radius);
-        let sigma = radius * inv_d;
-        let ac = view.cosine.min(1.0) + SERIES_SLACK;
-        input.inv_d.0[i] = inv_d;
-        input.sigma.0[i] = sigma;
-        input.inv_rho.0[i] = 1.0 / (1.0 - sigma);
-        input.ac.0[i] = ac;
-        input.hperp.0[i] = (view.height + (view.tilt + ac + SERIES_SLACK) * radius) * inv_d;
-    }
-    let [x, y, z] = series_width::<N>(nodes, &input);
-    array(DVec3::ZERO, |i| DVec3::new(x.0[i], y.0[i], z.0[i]))
 }
 
 #[cfg(test)]

@@ -1,36 +1,25 @@
 //! Shading: the session a renderer keeps per thread, its per-point query,
-//! thresholds, the error list, refinement, interpolation across levels and
-//! the exact reference sum.
+//! the batch call and the exact reference sum.
 
 mod batch;
-mod blend;
-mod error_list;
 mod exact;
 mod grouping;
 mod packed;
 mod query;
-mod refine;
-mod result;
-mod threshold;
 
 use core::fmt;
 
 use glam::{DVec3, Vec3};
 
-use crate::geometry::Surface;
+use crate::cut::{GroupScratch, shade_point};
+use crate::cut::policy::is_small_scene;
 use crate::shader::{Shader, ViewIndependent};
 use crate::tree::LightTree;
 use crate::visibility::{Unoccluded, Visibility};
-use crate::{LightLanes, ShadeError};
-
-use blend::{Item, Nesting};
-use error_list::ErrorList;
-use refine::{Cut, reported_bound};
+use crate::{LightLanes, ShadeError, ShadeResult, Threshold};
 
 pub use batch::BatchStats;
 pub use query::{Accepts, NoView, Query, WithView};
-pub use result::{ShadeResult, Stop};
-pub use threshold::{Target, Threshold};
 
 /// A shading session: a tree, a shader and reusable scratch space.
 ///
@@ -44,14 +33,14 @@ pub use threshold::{Target, Threshold};
 /// [`ShadeResult`], [`exact_query`](Self::exact_query) sums the model over
 /// every light. For view-independent shaders without occluders,
 /// [`shade`](Self::shade) and [`exact`](Self::exact) take the point and
-/// normal directly.
+/// normal directly. [`shade_batch`](Self::shade_batch) shades many queries
+/// at once, neighbouring points sharing one cut.
 pub struct Shading<'t, S: Shader> {
     tree: &'t LightTree,
     shader: S,
     /// For a small scene, summed rather than cut where its lights are known
-    /// visible, its lights side by side for the shader's
-    /// [`sum_lanes_coarse`](Shader::sum_lanes_coarse); `None` for other
-    /// trees.
+    /// visible, its lights side by side for the shader's coarse sums;
+    /// `None` for other trees.
     small_lanes: Option<Vec<LightLanes>>,
     scratch: Scratch,
 }
@@ -60,9 +49,8 @@ pub struct Shading<'t, S: Shader> {
 /// tree and shader.
 #[derive(Debug, Default)]
 struct Scratch {
-    list: ErrorList,
-    blend: Vec<Item>,
-    nesting: Nesting,
+    point: crate::cut::PointScratch,
+    group: GroupScratch,
     batch: batch::BatchScratch,
 }
 
@@ -70,15 +58,15 @@ impl LightTree {
     /// A shading session for `shader` over this tree.
     ///
     /// For a small scene (at most 1,024 lights, none of them coincident) the
-    /// session keeps a copy of the lights side by side ([`LightLanes`], 24
-    /// bytes a light), from which the shader sums them (see
+    /// session keeps a copy of the lights side by side (24 bytes a light),
+    /// from which the shader sums them (see
     /// [`shade_query`](Shading::shade_query)).
     #[must_use]
     pub fn shading<S: Shader>(&self, shader: S) -> Shading<'_, S> {
         Shading {
             tree: self,
             shader,
-            small_lanes: self.is_small_scene().then(|| LightLanes::of(&self.lights)),
+            small_lanes: is_small_scene(self).then(|| LightLanes::of(&self.lights)),
             scratch: Scratch::default(),
         }
     }
@@ -116,21 +104,14 @@ impl<'t, S: Shader> Shading<'t, S> {
     /// lights near the point for their size (`n D^2 <= 512 R^2` for `n`
     /// lights within `R` of a centroid at distance `D`), are summed light by
     /// light when they enter the cut, and a tree of at most 256 lights (1,024
-    /// where the threshold lets lights be summed coarsely, see
-    /// [`Shader::sum_lights_coarse`]; none of them coincident) whose lights
-    /// are known visible is summed whole when its root alone does not meet
-    /// the threshold (not with interpolation across levels, whose blend
-    /// needs bounded nodes, nor beyond the budget). Summed lights carry no
-    /// error beyond the coarse sums' certified rounding. A small scene keeps
-    /// its lights side by side as well ([`LightLanes`], 24 bytes a light,
-    /// in the session), for the shader's [`Shader::sum_scene_coarse`],
-    /// which sums them in one call (else [`Shader::sum_lanes_coarse`], 64
-    /// at a time); when the point lies in the root's ball it is summed at
-    /// once, without setting up the cut (the same result). So is a scene of
-    /// at most 192 lights wherever the point lies, and whether or not its
-    /// root's bound would meet the threshold (the sum costs less than
-    /// bounding the root); a host's cut that is told the root is visible
-    /// then sums it the same way, with the same result.
+    /// where the threshold lets lights be summed coarsely; none of them
+    /// coincident) whose lights are known visible is summed whole when its
+    /// root alone does not meet the threshold (not with interpolation across
+    /// levels, whose blend needs bounded nodes, nor beyond the budget).
+    /// Summed lights carry no error beyond the coarse sums' certified
+    /// rounding. A scene of at most 192 lights is summed whole wherever the
+    /// point lies, once known visible (the sum costs less than bounding the
+    /// root).
     ///
     /// `visibility` is the host's ray tracer ([`Visibility`]); pass
     /// [`Unoccluded`] for none, or `&mut host` to keep the host.
@@ -149,118 +130,24 @@ impl<'t, S: Shader> Shading<'t, S> {
         S: Accepts<M>,
     {
         threshold.check()?;
-        Ok(self.shade_checked(query.surface(), query.point(), threshold, visibility))
+        Ok(self.shade_checked(query, &threshold, visibility))
     }
 
-    /// [`shade_query`](Self::shade_query) after its checks: on `x86_64`
-    /// processors with AVX2, a copy of the whole cut compiled for AVX2 (the
-    /// same bits, see [`dispatch`](crate::dispatch)), elsewhere the baseline build.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
-    fn shade_checked<V: Visibility>(
+    /// [`shade_query`](Self::shade_query) after its checks, compiled for
+    /// AVX2 where the processor has it ([`dispatch`](crate::dispatch)).
+    #[inline]
+    fn shade_checked<M, V: Visibility>(
         &mut self,
-        surface: &Surface,
-        point: Vec3,
-        threshold: Threshold,
+        query: &Query<M>,
+        threshold: &Threshold,
         visibility: V,
     ) -> ShadeResult {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                return unsafe { self.shade_avx2(surface, point, threshold, visibility) };
-            }
-        }
-        self.shade_inlined(surface, point, threshold, visibility)
-    }
-
-    /// [`shade_checked`](Self::shade_checked) compiled for AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn shade_avx2<V: Visibility>(
-        &mut self,
-        surface: &Surface,
-        point: Vec3,
-        threshold: Threshold,
-        visibility: V,
-    ) -> ShadeResult {
-        self.shade_inlined(surface, point, threshold, visibility)
-    }
-
-    /// The cut itself, inlined into each of the above.
-    #[inline(always)]
-    fn shade_inlined<V: Visibility>(
-        &mut self,
-        surface: &Surface,
-        point: Vec3,
-        threshold: Threshold,
-        visibility: V,
-    ) -> ShadeResult {
-        if let Some(lanes) = &self.small_lanes
-            && let Some(result) = refine::shade_small_scene::<S, V>(
-                self.tree,
-                &self.shader,
-                lanes,
-                surface,
-                &threshold,
-            )
-        {
-            return result;
-        }
-        let mut cut = Cut::new(
-            self.tree,
-            &self.shader,
-            surface,
-            point,
-            &threshold,
-            visibility,
-            self.small_lanes.as_deref(),
-        );
-        let list = &mut self.scratch.list;
-        let nesting = &mut self.scratch.nesting;
-        let interpolating = threshold.interpolation().is_some();
-        let outcome = cut.run(list, &threshold, interpolating.then_some(&mut *nesting));
-        let unbounded = list.has_unbounded();
-        let (mut radiance, mut bound) = if interpolating && !unbounded {
-            // Each refined node's interval intersected with its children's.
-            outcome.confirmed.unwrap_or_else(|| nesting.fold(list))
-        } else {
-            let (estimate, error) = list.resum();
-            (
-                cut.settled.value() + estimate,
-                reported_bound(error + cut.settled_error),
-            )
-        };
-        if let (Some(band), Stop::ThresholdMet) = (threshold.interpolation(), outcome.stop) {
-            let top = list.largest();
-            let after = threshold.excess(radiance, bound, top);
-            // The blend's bound is re-checked; for the per-node target the
-            // blend refines no node less than the error list did, so the
-            // largest single error cannot grow.
-            if let Some((r, e)) = blend::interpolate(
-                &mut cut,
-                list,
-                nesting,
-                &mut self.scratch.blend,
-                &threshold,
-                band,
-                outcome.last_step,
-                (top, after),
-            ) && threshold.met(r, e, 0.0)
-            {
-                (radiance, bound) = (r, e);
-            }
-        }
-        ShadeResult {
-            radiance,
-            error_bound: if unbounded { DVec3::INFINITY } else { bound },
-            nodes_evaluated: cut.nodes,
-            lights_evaluated: cut.lights,
-            classify_queries: cut.classify_queries,
-            point_queries: cut.point_queries,
-            stop: outcome.stop,
-        }
+        let (tree, shader, lanes) = (self.tree, &self.shader, self.small_lanes.as_deref());
+        let scratch = &mut self.scratch.point;
+        let at = (query.surface(), query.point());
+        crate::dispatch::with_avx2(|| {
+            shade_point(tree, shader, lanes, at, threshold, visibility, scratch)
+        })
     }
 
     /// The exact model (crate docs, "The model") for one query, summed over
@@ -314,7 +201,8 @@ impl<S: ViewIndependent> Shading<'_, S> {
 mod tests {
     use glam::Vec3;
 
-    use super::{Query, ShadeResult, Threshold};
+    use super::Query;
+    use crate::{ShadeResult, Threshold};
     use crate::{Lambert, LightTree, PointLight, Unoccluded};
 
     fn bits(r: &ShadeResult) -> ([u64; 3], [u64; 3], [u32; 4], super::Stop) {
@@ -395,7 +283,7 @@ mod tests {
                 };
                 let a = with.shade_query(&query, threshold, Unoccluded).unwrap();
                 let b = without.shade_query(&query, threshold, Unoccluded).unwrap();
-                let summed = super::refine::shade_small_scene::<_, Unoccluded>(
+                let summed = crate::cut::shade_small_scene::<_, Unoccluded>(
                     &tree,
                     &lambert,
                     with.small_lanes.as_deref().unwrap(),

@@ -50,6 +50,7 @@
 
 use glam::{DVec3, Vec3};
 
+use crate::cut::Spread;
 use crate::lanes::Real;
 use crate::tree::Node;
 
@@ -360,34 +361,6 @@ struct Frame {
     scale: f64,
     intensity: f64,
     out: f64,
-}
-
-/// How far a group's points lie from a cut's entries: no point nearer an
-/// entry than `nearest`, no entry farther from the group's centre than
-/// `farthest`.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Spread {
-    pub(crate) nearest: f64,
-    pub(crate) farthest: f64,
-}
-
-impl Default for Spread {
-    fn default() -> Self {
-        Self {
-            nearest: f64::INFINITY,
-            farthest: 0.0,
-        }
-    }
-}
-
-impl Spread {
-    /// Takes in an entry `distance` from the centre, no point nearer it
-    /// than `nearest`.
-    #[inline(always)]
-    pub(crate) fn note(&mut self, nearest: f64, distance: f64) {
-        self.nearest = self.nearest.min(nearest);
-        self.farthest = self.farthest.max(distance);
-    }
 }
 
 /// `x` in `f32`, rounded up, never down (for positive `x` far from the

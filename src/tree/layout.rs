@@ -213,44 +213,7 @@ pub struct LightTree {
 /// A node whose lights are not known to lie in one plane.
 pub(crate) const NO_PLANE: u32 = u32::MAX;
 
-/// Scenes of at most this many lights (and no coincident ones) are small:
-/// a point whose lights are known visible sums them light by light rather
-/// than cut them, when the root alone does not meet the threshold (and
-/// without interpolation across levels), because summing costs less.
-/// Measured on the street city, one point at a time, against the cut at
-/// relative thresholds of 30%, 10% and 1%: the sum took 0.42, 0.62 and 1.25
-/// us per point at 64, 128 and 256 lights, the cut 1.4-1.7, 1.1-1.6 and
-/// 1.9-3.2; at 512 lights the sum (2.4 us) beat the cut only at 1% (3.2
-/// us, 2.0 at 30%).
-pub(crate) const SMALL_SCENE_LIGHTS: u32 = 256;
-
-/// [`SMALL_SCENE_LIGHTS`] where the lights are summed coarsely
-/// ([`Shader::sum_scene_coarse`](crate::Shader::sum_scene_coarse), for
-/// relative targets of at least `2^-12`; `Lambert` about 1 ns per light
-/// from lights kept side by side, in one call). Measured on the street
-/// city, one point at a time (the mean of 5,000 passes over 128 points,
-/// one core): the whole sum took 0.71-0.77, 0.85-1.14, 1.09-1.13 and 1.29-1.46
-/// us per point at 800, 1,000, 1,300 and 1,600 lights, the cut at
-/// certified targets of 30%, 10% and 1% 0.99-1.10, 1.02-1.27, 1.12-1.32
-/// and 1.19-1.38: the sum is the cheaper up to about 1,000 lights at every
-/// target, beyond only at the tighter ones.
-pub(crate) const SMALL_SCENE_LIGHTS_COARSE: u32 = 1024;
-
 impl LightTree {
-    /// Whether the tree may be a small scene (see [`SMALL_SCENE_LIGHTS`]
-    /// and [`SMALL_SCENE_LIGHTS_COARSE`]): at most the larger number of
-    /// lights, none of them coincident (a leaf of coincident lights is one
-    /// light to the cut, and stays so).
-    pub(crate) fn is_small_scene(&self) -> bool {
-        self.nodes.first().is_some_and(|root| {
-            root.light_count <= SMALL_SCENE_LIGHTS_COARSE
-                && !self
-                    .nodes
-                    .iter()
-                    .any(|n| n.radius == 0.0 && n.light_count > 1)
-        })
-    }
-
     /// The plane all lights of node `index` lie in exactly, if one was
     /// recorded.
     #[inline]

@@ -13,4 +13,4 @@ mod validate;
 
 pub use build::TreeBuilder;
 pub use layout::{LightTree, Node};
-pub(crate) use layout::{MAX_CHILDREN, NO_PLANE, SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE};
+pub(crate) use layout::{MAX_CHILDREN, NO_PLANE};

@@ -29,7 +29,7 @@ fn check_point<S: Shader>(
     check_bound(&r, exact)?;
     check_threshold(&r, &t)?;
 
-    let zero = shade(shading, Threshold::exact());
+    let zero = shade(shading, Threshold::zero());
     prop_assert_eq!(zero.stop, Stop::ThresholdMet);
     for k in 0..3 {
         prop_assert!(
@@ -69,7 +69,7 @@ proptest! {
     ) {
         let tree = LightTree::build(&lights).unwrap();
         prop_assert_eq!(tree.validate(), Ok(()));
-        let kind = if paper { BoundKind::Paper } else { BoundKind::Tight };
+        let kind = if paper { BoundKind::Paper } else { BoundKind::Series };
         let mut shading = tree.shading(Lambert::new(kd).with_bound(kind));
         let exact = shading.exact(p, n).unwrap();
         check_point(&mut shading, |s, t| s.shade(p, n, t).unwrap(), exact, t, p)?;
@@ -157,7 +157,7 @@ fn empty_tree_shades_to_zero() {
     let tree = LightTree::build(&[]).unwrap();
     tree.validate().unwrap();
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
-    let r = s.shade(Vec3::ZERO, Vec3::Z, Threshold::exact()).unwrap();
+    let r = s.shade(Vec3::ZERO, Vec3::Z, Threshold::zero()).unwrap();
     assert_eq!(r.radiance, glam::DVec3::ZERO);
     assert_eq!(r.error_bound, glam::DVec3::ZERO);
     assert_eq!(r.stop, Stop::ThresholdMet);

@@ -30,7 +30,7 @@ fn coincident_stack_costs_a_constant() {
             (at - Vec3::Z, Vec3::Z),
             (at + Vec3::X, -Vec3::X),
         ] {
-            for t in [Threshold::exact(), Threshold::relative(0.01)] {
+            for t in [Threshold::zero(), Threshold::relative(0.01)] {
                 let r = s.shade(p, normal, t).unwrap();
                 assert!(r.certifies(s.exact(p, normal).unwrap()), "{r:?}");
                 cost.push(r.cost());

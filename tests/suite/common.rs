@@ -113,7 +113,7 @@ pub fn threshold() -> impl Strategy<Value = Threshold> {
         (-6.0f64..=3.0).prop_map(|u| Threshold::absolute(10f64.powf(u))),
         (1e-4f64..=0.5).prop_map(Threshold::relative),
         (1e-4f64..=0.5).prop_map(Threshold::per_node),
-        Just(Threshold::exact()),
+        Just(Threshold::zero()),
         Just(Threshold::absolute(f64::INFINITY)),
         (1u32..=5000, 1e-4f64..=0.5).prop_map(|(b, t)| Threshold::relative(t).with_budget(b)),
         (1e-4f64..=0.5, 1.1f64..=8.0)

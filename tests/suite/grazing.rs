@@ -608,7 +608,7 @@ fn check_shader<S: Shader>(
         (exact - model).abs().cmple(slack).all(),
         "{what}: exact_query {exact:?} vs the model {model:?}"
     );
-    for t in [t, Threshold::exact(), Threshold::absolute(f64::INFINITY)] {
+    for t in [t, Threshold::zero(), Threshold::absolute(f64::INFINITY)] {
         let r = shading
             .shade_query(&query, t, Unoccluded)
             .expect("valid threshold");
@@ -712,7 +712,7 @@ fn failure_census() {
     for _ in 0..cases {
         let (scene, kd, t) = lambert.new_tree(&mut runner).unwrap().current();
         count(0, check_lambert(&scene, kd, BoundKind::Paper, t), &scene);
-        count(1, check_lambert(&scene, kd, BoundKind::Tight, t), &scene);
+        count(1, check_lambert(&scene, kd, BoundKind::Series, t), &scene);
         let (scene, ks, e, t) = phong.new_tree(&mut runner).unwrap().current();
         count(2, check_phong(&scene, ks, e, t), &scene);
     }
@@ -737,7 +737,7 @@ fn lambert_one(light: Vec3, p: Vec3, n: Vec3) -> (DVec3, DVec3, Vec<ShadeResult>
         lights: tree.lights().to_vec(),
     };
     let results = [
-        Threshold::exact(),
+        Threshold::zero(),
         Threshold::relative(0.01),
         Threshold::per_node(0.01),
         Threshold::absolute(f64::INFINITY),

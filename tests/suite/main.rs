@@ -20,6 +20,5 @@ mod contract;
 mod grazing;
 mod interpolation;
 mod no_alloc;
-mod node_bound;
 mod stability;
 mod visibility;

@@ -71,7 +71,7 @@ fn shading_does_not_allocate_once_warmed() {
     let thresholds = [
         Threshold::relative(0.01),
         Threshold::relative(1e-4),
-        Threshold::exact(),
+        Threshold::zero(),
     ];
     let view = Vec3::new(0.3, 0.2, 1.0);
     // Warm up: the error list grows to its largest size.

@@ -13,7 +13,7 @@ use manylights::{
 /// Thresholds every case is shaded with.
 fn thresholds() -> [Threshold; 7] {
     [
-        Threshold::exact(),
+        Threshold::zero(),
         Threshold::relative(0.01),
         Threshold::relative(0.2),
         Threshold::absolute(1e-3),
@@ -56,7 +56,7 @@ fn check_all(lights: &[PointLight], p: Vec3, n: Vec3, v: Vec3) -> DVec3 {
     let tree = LightTree::build(lights).expect("valid lights");
     tree.validate().expect("valid tree");
     let mut diffuse = DVec3::ZERO;
-    for kind in [BoundKind::Tight, BoundKind::Paper] {
+    for kind in [BoundKind::Series, BoundKind::Paper] {
         let mut s = tree.shading(Lambert::new(Vec3::new(0.9, 0.5, 0.2)).with_bound(kind));
         let exact = s.exact(p, n).unwrap();
         diffuse = exact;
@@ -113,7 +113,7 @@ fn check_batch(tree: &LightTree, lights: &[PointLight], p: Vec3, n: Vec3) {
         .map(|q| Query::new(q, n).unwrap())
         .collect();
     let mut s = tree.shading(Lambert::new(Vec3::new(0.9, 0.5, 0.2)));
-    let mut results = vec![s.shade(p, n, Threshold::exact()).unwrap(); queries.len()];
+    let mut results = vec![s.shade(p, n, Threshold::zero()).unwrap(); queries.len()];
     for t in thresholds() {
         s.shade_batch(&queries, t, Unoccluded, &mut results)
             .unwrap();
@@ -304,7 +304,7 @@ fn all_intensities_zero() {
     let tree = LightTree::build(&lights).unwrap();
     let r = tree
         .shading(Lambert::new(Vec3::ONE))
-        .shade(Vec3::new(0.0, 0.0, -6.0), Vec3::Z, Threshold::exact())
+        .shade(Vec3::new(0.0, 0.0, -6.0), Vec3::Z, Threshold::zero())
         .unwrap();
     assert_eq!((r.radiance, r.error_bound), (DVec3::ZERO, DVec3::ZERO));
     assert_eq!(r.cost(), 0, "a dark root is settled without a bound");
@@ -614,7 +614,7 @@ fn thresholds_zero_infinite_nan_negative() {
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     let p = Vec3::new(0.0, 0.0, -20.0);
     let exact = s.exact(p, Vec3::Z).unwrap();
-    let zero = s.shade(p, Vec3::Z, Threshold::exact()).unwrap();
+    let zero = s.shade(p, Vec3::Z, Threshold::zero()).unwrap();
     assert!(
         (zero.radiance - exact).abs().max_element()
             <= 2.0 * ShadeResult::ROUNDING_ALLOWANCE * exact.max_element()
@@ -648,7 +648,7 @@ fn node_budgets_zero_and_one() {
     let exact = s.exact(p, Vec3::Z).unwrap();
     for b in [0, 1] {
         let r = s
-            .shade(p, Vec3::Z, Threshold::exact().with_budget(b))
+            .shade(p, Vec3::Z, Threshold::zero().with_budget(b))
             .unwrap();
         assert_eq!(r.cost(), 1, "budget {b}: the root only");
         assert_eq!(r.stop, Stop::Budget);
@@ -657,7 +657,7 @@ fn node_budgets_zero_and_one() {
     // Inside the root's ball: the root has no finite bound, so a budget of 1
     // reports an infinite (documented) bound rather than a wrong one.
     let r = s
-        .shade(Vec3::ZERO, Vec3::Z, Threshold::exact().with_budget(1))
+        .shade(Vec3::ZERO, Vec3::Z, Threshold::zero().with_budget(1))
         .unwrap();
     assert_eq!(r.stop, Stop::Budget);
     assert!(r.error_bound.max_element().is_infinite() && r.radiance.is_finite());

@@ -206,7 +206,7 @@ fn check_occluded(
     check_bound(r, exact)?;
     check_threshold(r, t)?;
     check_counters(r, host)?;
-    if *t == Threshold::exact() {
+    if *t == Threshold::zero() {
         check_exact(r, exact)?;
     }
     Ok(())
@@ -479,7 +479,7 @@ fn fully_occluded_tree_is_zero_with_zero_error() {
     let ceiling = vec![aabb([-50.0, -50.0, 3.0], [50.0, 50.0, 4.0])];
     let tree = LightTree::build(&lights).unwrap();
     let mut shading = tree.shading(Lambert::new(Vec3::ONE));
-    for t in street_thresholds().into_iter().chain([Threshold::exact()]) {
+    for t in street_thresholds().into_iter().chain([Threshold::zero()]) {
         let mut host = Occluders::new(ceiling.clone());
         let r = shading
             .shade_query(
@@ -527,7 +527,7 @@ fn occluded_cluster_is_dropped_without_point_queries() {
 
     let mut host = Occluders::new(wall);
     let r = shading
-        .shade_query(&Query::new(p, n).unwrap(), Threshold::exact(), &mut host)
+        .shade_query(&Query::new(p, n).unwrap(), Threshold::zero(), &mut host)
         .unwrap();
     check_exact(&r, exact).unwrap();
     assert!(host.answers[1] > 0, "no node classified occluded");
@@ -557,7 +557,7 @@ fn threshold_zero_is_the_shadowed_sum() -> Result<(), TestCaseError> {
         let r = shading
             .shade_query(
                 &Query::new(p, n).unwrap(),
-                Threshold::exact(),
+                Threshold::zero(),
                 &mut Occluders::new(walls.clone()),
             )
             .unwrap();
@@ -566,7 +566,7 @@ fn threshold_zero_is_the_shadowed_sum() -> Result<(), TestCaseError> {
         // light above the horizon at most.
         let mut unsure = Unsure(Occluders::new(walls.clone()));
         let r = shading
-            .shade_query(&Query::new(p, n).unwrap(), Threshold::exact(), &mut unsure)
+            .shade_query(&Query::new(p, n).unwrap(), Threshold::zero(), &mut unsure)
             .unwrap();
         check_exact(&r, exact)?;
         prop_assert!(r.point_queries as usize <= lights.len());

@@ -3,9 +3,25 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::geometry::{Cone, Surface};
+mod combined;
+
+pub use combined::Combined;
+
+use crate::geometry::{Cone, GroupView, Surface};
 use crate::tree::{LightTree, Node};
 use crate::{LightLanes, PointLight, ShadeError};
+
+/// The token of the [`Shader`] trait's crate-internal methods (the fast
+/// paths of the crate's own shaders: sums and bounds in `f32` lanes, bounds
+/// for groups of points). It lives in a private module, so a shader outside
+/// the crate can neither call nor override those methods; their defaults
+/// are what a custom shader gets, and need nothing from it.
+mod sealed {
+    #[derive(Clone, Copy, Debug)]
+    pub struct Seal;
+}
+
+pub(crate) use sealed::Seal;
 
 /// The most lights the cut passes to one [`Shader::sum_lights`] call.
 pub(crate) const SUM_LIGHTS_MAX: usize = 16;
@@ -13,10 +29,6 @@ pub(crate) const SUM_LIGHTS_MAX: usize = 16;
 /// The most lights the cut passes to one call of
 /// [`Shader::sum_lights_coarse`].
 pub(crate) const COARSE_LIGHTS_MAX: usize = 64;
-
-/// The smallest relative target for which the cut uses
-/// [`Shader::sum_lights_coarse`]: `2^-12`, about `2.4e-4`.
-pub(crate) const COARSE_TARGET_MIN: f64 = 1.0 / 4096.0;
 
 /// A node's estimated contribution with a certified interval around it, per
 /// RGB channel.
@@ -159,8 +171,10 @@ pub trait Shader {
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
+    #[doc(hidden)]
     fn sum_lights(
         &self,
+        _: Seal,
         point: &Self::PerPoint,
         surface: &Surface,
         lights: &[PointLight],
@@ -196,8 +210,10 @@ pub trait Shader {
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
+    #[doc(hidden)]
     fn sum_lights_coarse(
         &self,
+        _: Seal,
         point: &Self::PerPoint,
         surface: &Surface,
         lights: &[PointLight],
@@ -222,8 +238,10 @@ pub trait Shader {
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
+    #[doc(hidden)]
     fn sum_lanes_coarse(
         &self,
+        _: Seal,
         point: &Self::PerPoint,
         surface: &Surface,
         lanes: &[LightLanes],
@@ -248,8 +266,10 @@ pub trait Shader {
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
+    #[doc(hidden)]
     fn sum_scene_coarse(
         &self,
+        _: Seal,
         point: &Self::PerPoint,
         surface: &Surface,
         lanes: &[LightLanes],
@@ -287,8 +307,10 @@ pub trait Shader {
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
+    #[doc(hidden)]
     fn bound_children_coarse(
         &self,
+        _: Seal,
         point: &Self::PerPoint,
         surface: &Surface,
         tree: &LightTree,
@@ -329,7 +351,30 @@ pub trait Shader {
     /// ([`Shading::shade_batch`](crate::Shading::shade_batch)) then shares
     /// cuts between neighbouring points with the crate's own diffuse
     /// bounds; for `None` (the default) it shades each point on its own.
-    fn diffuse_albedo(&self) -> Option<DVec3> {
+    #[doc(hidden)]
+    fn diffuse_albedo(&self, _: Seal) -> Option<DVec3> {
+        None
+    }
+
+    /// For a shader whose [`diffuse_albedo`](Self::diffuse_albedo) is
+    /// `Some`: each node's error shared by every point of a group that
+    /// sees it as its [`GroupView`] (the node bound for one point, taken at
+    /// the worst distance, cosine and heights over the group, plus the
+    /// clamp term where members reach below some point's tangent plane),
+    /// `N` nodes side by side; `None` where the shader has no such bound.
+    /// For every point `p` of the group, the exact contribution of a
+    /// node's lights lies within that error of the diffuse estimate at `p`
+    /// (the degree-2 multipole series of the node's moments, with
+    /// intensities times the albedo).
+    #[doc(hidden)]
+    #[inline]
+    fn group_errors<const N: usize>(
+        &self,
+        _: Seal,
+        nodes: &[&Node; N],
+        views: &[GroupView; N],
+    ) -> Option<[DVec3; N]> {
+        let _ = (nodes, views);
         None
     }
 
@@ -352,225 +397,6 @@ pub trait Shader {
 /// view-less calls ([`Shading::shade`](crate::Shading::shade)), so a view
 /// dependent shader called without a view does not compile.
 pub trait ViewIndependent: Shader {}
-
-/// The sum of two shaders, e.g. `Combined::new(Lambert::new(kd),
-/// Phong::new(ks, e))`: contributions add, and so do bounds (the sum of two
-/// certified intervals is a certified interval of the sum).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Combined<A, B> {
-    /// First term.
-    pub first: A,
-    /// Second term.
-    pub second: B,
-}
-
-impl<A, B> Combined<A, B> {
-    /// `first + second`.
-    #[must_use]
-    pub const fn new(first: A, second: B) -> Self {
-        Self { first, second }
-    }
-}
-
-impl<A: Shader, B: Shader> Shader for Combined<A, B> {
-    type PerPoint = (A::PerPoint, B::PerPoint);
-
-    #[inline]
-    fn prepare(&self, surface: &Surface) -> Self::PerPoint {
-        (self.first.prepare(surface), self.second.prepare(surface))
-    }
-
-    /// The sum of the two terms, for a light at `x` of intensity `i`.
-    #[inline]
-    fn eval(&self, point: &Self::PerPoint, surface: &Surface, x: DVec3, i: DVec3) -> DVec3 {
-        self.first.eval(&point.0, surface, x, i) + self.second.eval(&point.1, surface, x, i)
-    }
-
-    /// Each term's [`eval_lights`](Shader::eval_lights), added light by
-    /// light: the same values as [`eval`](Shader::eval).
-    #[inline]
-    fn eval_lights(
-        &self,
-        p: &Self::PerPoint,
-        s: &Surface,
-        lights: &[PointLight],
-        out: &mut [DVec3],
-    ) {
-        let n = lights.len().min(out.len());
-        let (lights, out) = (&lights[..n], &mut out[..n]);
-        self.first.eval_lights(&p.0, s, lights, out);
-        let mut second = [DVec3::ZERO; SUM_LIGHTS_MAX];
-        for (lights, out) in lights
-            .chunks(SUM_LIGHTS_MAX)
-            .zip(out.chunks_mut(SUM_LIGHTS_MAX))
-        {
-            let second = &mut second[..lights.len()];
-            self.second.eval_lights(&p.1, s, lights, second);
-            for (a, b) in out.iter_mut().zip(second.iter()) {
-                *a += *b;
-            }
-        }
-    }
-
-    /// The two terms' [`sum_lights`](Shader::sum_lights), added.
-    #[inline]
-    fn sum_lights(&self, p: &Self::PerPoint, s: &Surface, lights: &[PointLight]) -> DVec3 {
-        self.first.sum_lights(&p.0, s, lights) + self.second.sum_lights(&p.1, s, lights)
-    }
-
-    /// Coarse where a term has a coarse sum, the other term's
-    /// [`sum_lights`](Shader::sum_lights) where it has none (Phong beside
-    /// a coarse Lambert), added; `None` where neither term has one. The
-    /// error is the coarse sums' plus `f64::EPSILON` of the total for the
-    /// last addition.
-    #[inline]
-    fn sum_lights_coarse(
-        &self,
-        p: &Self::PerPoint,
-        s: &Surface,
-        lights: &[PointLight],
-    ) -> Option<(DVec3, DVec3)> {
-        let first = self.first.sum_lights_coarse(&p.0, s, lights);
-        let second = self.second.sum_lights_coarse(&p.1, s, lights);
-        let (a, b) = match (first, second) {
-            (None, None) => return None,
-            (Some(a), Some(b)) => (a, b),
-            (Some(a), None) => (a, (summed(&self.second, &p.1, s, lights), DVec3::ZERO)),
-            (None, Some(b)) => ((summed(&self.first, &p.0, s, lights), DVec3::ZERO), b),
-        };
-        let sum = a.0 + b.0;
-        Some((sum, a.1 + b.1 + sum * f64::EPSILON))
-    }
-
-    /// The sum of the two intervals, for per-point data `p` and surface `s`.
-    #[inline]
-    fn bound(&self, p: &Self::PerPoint, s: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {
-        added(
-            &self.first.bound(&p.0, s, node, cone),
-            &self.second.bound(&p.1, s, node, cone),
-        )
-    }
-
-    #[inline]
-    fn bound_nodes(
-        &self,
-        p: &Self::PerPoint,
-        s: &Surface,
-        nodes: &[&Node],
-        cones: &[Cone],
-        out: &mut [NodeEstimate],
-    ) {
-        let mut second = [NodeEstimate::ZERO; 8];
-        let chunks = nodes.chunks(8).zip(cones.chunks(8));
-        for ((nodes, cones), out) in chunks.zip(out.chunks_mut(8)) {
-            self.first.bound_nodes(&p.0, s, nodes, cones, out);
-            let second = &mut second[..out.len()];
-            self.second.bound_nodes(&p.1, s, nodes, cones, second);
-            for (a, b) in out.iter_mut().zip(second.iter()) {
-                *a = added(a, b);
-            }
-        }
-    }
-
-    /// Both terms' bounds, added child by child (`None` where either gives
-    /// none): coarse where a term has coarse bounds, the other term's
-    /// [`bound`](Shader::bound) under each child's cone where it has none
-    /// (Phong beside a coarse Lambert); `false` where neither term has
-    /// them.
-    #[inline]
-    fn bound_children_coarse(
-        &self,
-        p: &Self::PerPoint,
-        s: &Surface,
-        tree: &LightTree,
-        parent: usize,
-        wanted: u8,
-        out: &mut [Option<NodeEstimate>],
-    ) -> bool {
-        let len = out.len().min(crate::tree::MAX_CHILDREN);
-        let mut first = [None; crate::tree::MAX_CHILDREN];
-        let mut second = [None; crate::tree::MAX_CHILDREN];
-        // Into scratch, so that `out` is left alone if neither term has
-        // coarse bounds.
-        let first_coarse =
-            self.first
-                .bound_children_coarse(&p.0, s, tree, parent, wanted, &mut first[..len]);
-        let second_coarse =
-            self.second
-                .bound_children_coarse(&p.1, s, tree, parent, wanted, &mut second[..len]);
-        if !first_coarse && !second_coarse {
-            return false;
-        }
-        let Some(node) = tree.nodes().get(parent) else {
-            return false;
-        };
-        let children = &tree.nodes()[node.children()];
-        for (i, child) in children.iter().enumerate().take(len) {
-            if wanted & (1 << i) == 0 {
-                continue;
-            }
-            // The term without coarse bounds, as `bound_nodes` would give
-            // it: no cone (a ball reaching the point) leaves the child
-            // without a bound.
-            let cone = if first_coarse && second_coarse {
-                None
-            } else {
-                child.cone(s.point)
-            };
-            let a = if first_coarse {
-                first[i]
-            } else {
-                cone.map(|c| self.first.bound(&p.0, s, child, &c))
-            };
-            let b = if second_coarse {
-                second[i]
-            } else {
-                cone.map(|c| self.second.bound(&p.1, s, child, &c))
-            };
-            out[i] = match (a, b) {
-                (Some(a), Some(b)) => Some(added(&a, &b)),
-                _ => None,
-            };
-        }
-        true
-    }
-
-    /// Diffuse when both terms are: the albedos add.
-    #[inline]
-    fn diffuse_albedo(&self) -> Option<DVec3> {
-        Some(self.first.diffuse_albedo()? + self.second.diffuse_albedo()?)
-    }
-
-    /// Both terms vanish below the same plane.
-    #[inline]
-    fn horizon(&self, surface: &Surface) -> Option<Vec3> {
-        let a = self.first.horizon(surface)?;
-        (self.second.horizon(surface)? == a).then_some(a)
-    }
-}
-
-/// The interval of a sum of two shaders' terms: the ends and estimates
-/// added.
-#[inline]
-fn added(a: &NodeEstimate, b: &NodeEstimate) -> NodeEstimate {
-    NodeEstimate {
-        estimate: a.estimate + b.estimate,
-        lower: a.lower + b.lower,
-        upper: a.upper + b.upper,
-    }
-}
-
-/// `shader`'s [`Shader::sum_lights`] over any number of `lights`, at most
-/// [`SUM_LIGHTS_MAX`] a call.
-#[inline]
-fn summed<S: Shader>(shader: &S, p: &S::PerPoint, s: &Surface, lights: &[PointLight]) -> DVec3 {
-    lights
-        .chunks(SUM_LIGHTS_MAX)
-        .map(|l| shader.sum_lights(p, s, l))
-        .sum()
-}
-
-impl<A: ViewIndependent, B: ViewIndependent> ViewIndependent for Combined<A, B> {}
 
 /// The colour for a convenience constructor: `debug_assert!`s that it is
 /// valid; a release build keeps results finite by reading NaN and negative

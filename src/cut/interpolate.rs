@@ -27,8 +27,9 @@
 
 use glam::DVec3;
 
+use super::engine::{Cut, Region};
 use super::error_list::{Class, Entry, ErrorList, Seen};
-use super::refine::{Cut, reported_bound};
+use super::point::{Point, reported_bound};
 use super::threshold::{Target, Threshold};
 use crate::numeric::CompensatedSum;
 use crate::shader::Shader;
@@ -441,7 +442,7 @@ impl Ramp {
         floor: f64::NEG_INFINITY,
     };
 
-    fn new(level: f64, band: f64) -> Self {
+    pub(crate) fn new(level: f64, band: f64) -> Self {
         Self {
             level,
             floor: level / band,
@@ -451,7 +452,7 @@ impl Ramp {
     /// The weight of a node of priority `key` (infinite for a node with no
     /// finite bound, always refined).
     #[inline]
-    fn alpha(&self, key: f64) -> f64 {
+    pub(crate) fn alpha(&self, key: f64) -> f64 {
         if key >= self.level {
             1.0
         } else {
@@ -527,7 +528,7 @@ fn nest(
 /// the level placed between the list's last two steps ([`level`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn interpolate<S: Shader, V: Visibility>(
-    cut: &mut Cut<'_, S, V>,
+    cut: &mut Cut<'_, S, V, Point<'_, S>>,
     list: &ErrorList,
     nesting: &mut Nesting,
     items: &mut Vec<Item>,
@@ -637,7 +638,7 @@ const ROOT_SPAN: f64 = 1e-14;
 /// fall with the level) and is summed once into the fixed terms of its
 /// item or frame. `false` when the expansion would exceed the budget.
 fn expand<S: Shader, V: Visibility>(
-    cut: &mut Cut<'_, S, V>,
+    cut: &mut Cut<'_, S, V, Point<'_, S>>,
     list: &ErrorList,
     nesting: &mut Nesting,
     items: &mut Vec<Item>,
@@ -670,11 +671,12 @@ fn expand<S: Shader, V: Visibility>(
             let it = &items[next];
             (it.node, it.visible, it.key, it.frame)
         };
-        if !cut.can_refine(&cut.tree.nodes[node as usize], visible) {
+        let tree = cut.tree;
+        if !<Point<'_, S> as Region<S>>::affordable(cut, list, &tree.nodes[node as usize], visible) {
             return false;
         }
         let parent = next as u32;
-        let outer = std::mem::take(&mut cut.settled);
+        let outer = std::mem::take(&mut cut.region.settled);
         let magnitude = &mut nesting.fixed_magnitude;
         cut.refine(node as usize, visible, 1.0, &mut |mut e: Entry| {
             e.key = e.key.min(key);
@@ -688,7 +690,7 @@ fn expand<S: Shader, V: Visibility>(
                 *magnitude += lo.abs() + hi.abs();
             }
         });
-        let settled = std::mem::replace(&mut cut.settled, outer).value();
+        let settled = std::mem::replace(&mut cut.region.settled, outer).value();
         let p = &mut items[next];
         p.fixed_lo.add(settled);
         p.fixed_hi.add(settled);

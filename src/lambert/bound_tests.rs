@@ -12,13 +12,26 @@
 //! line to the node's farthest member, with facing, grazing (down to
 //! exactly perpendicular), straddling, averted and random normals.
 
-use crate::common::cases;
 use glam::{DVec3, Vec3};
-use manylights::{
+use proptest::prelude::*;
+
+use crate::shader::Seal;
+use crate::{
     BoundKind, Combined, Cone, Lambert, LightTree, NodeEstimate, Phong, PointLight, ShadeResult,
     Shader, Surface,
 };
-use proptest::prelude::*;
+
+/// `default` cases per property, or `PROPTEST_CASES` where it is set.
+fn cases(default: u32) -> ProptestConfig {
+    let cases = std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(default);
+    ProptestConfig {
+        cases,
+        ..ProptestConfig::default()
+    }
+}
 
 /// A unit vector, uniform on the sphere.
 fn unit() -> impl Strategy<Value = DVec3> {
@@ -287,7 +300,7 @@ fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<boo
     // A coarse bound is only given by the series bound.
     if kind != BoundKind::Series {
         let mut out = [None; 8];
-        prop_assert!(!shader.bound_children_coarse(&(), &surface, tree, 0, 1, &mut out));
+        prop_assert!(!shader.bound_children_coarse(Seal, &(), &surface, tree, 0, 1, &mut out));
     }
     for k in 0..3 {
         let allowance = ShadeResult::ROUNDING_ALLOWANCE * exact[k];
@@ -353,7 +366,7 @@ fn check_coarse(
     let siblings = tree.nodes()[parent].children().len();
     for wanted in [1u8 << lane, ((1u16 << siblings) - 1) as u8] {
         let mut out = [Some(NodeEstimate::ZERO); 8];
-        prop_assert!(shader.bound_children_coarse(&(), surface, tree, parent, wanted, &mut out));
+        prop_assert!(shader.bound_children_coarse(Seal, &(), surface, tree, parent, wanted, &mut out));
         let Some(bound) = out[lane] else {
             // No finite bound: exactly where the f64 bound has none.
             prop_assert!(false, "no coarse bound where the cone exists");
@@ -442,9 +455,10 @@ fn check_combined_coarse(
     let combined = Combined::new(lambert, phong);
     let at = combined.prepare(&surface);
     let mut out = [None; 8];
-    prop_assert!(combined.bound_children_coarse(&at, &surface, tree, parent, 1 << lane, &mut out));
+    prop_assert!(combined.bound_children_coarse(Seal, &at, &surface, tree, parent, 1 << lane, &mut out));
     let mut diffuse = [None; 8];
     prop_assert!(lambert.bound_children_coarse(
+        Seal,
         &(),
         &surface,
         tree,

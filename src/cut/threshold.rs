@@ -90,7 +90,7 @@ impl Threshold {
     /// than a few at a time ([`Shader::sum_lights`](crate::Shader::sum_lights)),
     /// so that it returns the same value.
     #[must_use]
-    pub const fn exact() -> Self {
+    pub const fn zero() -> Self {
         Self::absolute(0.0)
     }
 
@@ -248,7 +248,7 @@ impl Threshold {
 
     /// Whether the target is 0: the exact sum is asked for.
     #[inline]
-    pub(crate) fn is_exact(&self) -> bool {
+    pub(crate) fn is_zero(&self) -> bool {
         match self.target {
             Target::Absolute(t) | Target::Relative(t) | Target::PerNode(t) => t == 0.0,
         }

@@ -418,6 +418,19 @@ impl ErrorList {
         (self.estimate, self.error + self.rounding)
     }
 
+    /// Number of entries pushed since the last [`clear`](Self::clear)
+    /// (the next entry's slot).
+    #[inline(always)]
+    pub(crate) fn slots(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// The entry pushed into slot `slot`.
+    #[inline(always)]
+    pub(crate) fn entry(&self, slot: u32) -> &Entry {
+        &self.entries[slot as usize]
+    }
+
     /// Number of waiting entries.
     pub(crate) fn len(&self) -> usize {
         self.waiting

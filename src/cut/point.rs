@@ -1,0 +1,580 @@
+//! The cut for one shading point: node entries are the shader's certified
+//! intervals at the point, single lights are evaluated and summed at once,
+//! and the host is asked about a node when the list takes it.
+
+use glam::{DVec3, Vec3};
+
+use super::engine::{Cut, Outcome, Pending, Region, seen};
+use super::error_list::{Class, Entry, ErrorList, Seen};
+use super::interpolate::{self, Item, NO_PARENT, Nesting};
+use super::policy::{
+    COARSE_NODES_MAX, COARSE_SHARE_DIVISOR, COARSE_TARGET_MIN, EXACT_NODE_LIGHTS,
+    NEAR_NODE_LIGHTS, SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE, is_near,
+};
+use super::result::{ShadeResult, Stop};
+use super::threshold::{Target, Threshold};
+use crate::LightLanes;
+use crate::geometry::{Cone, Surface};
+use crate::numeric::{CompensatedSum, SUM_SLACK};
+use crate::shader::{NodeEstimate, Seal, Shader};
+use crate::tree::{LightTree, NO_PLANE, Node};
+use crate::visibility::Visibility;
+
+/// The region of one shading point: what the cut reads of it and what it
+/// has settled there.
+pub(crate) struct Point<'a, S: Shader> {
+    pub(crate) surface: &'a Surface,
+    pub(crate) per_point: S::PerPoint,
+    /// The shading point as the host was given it.
+    pub(crate) point: Vec3,
+    /// Largest visible node summed light by light instead of bounded: 0
+    /// with interpolation, whose blend ramps through bounded nodes.
+    exact_lights: u32,
+    /// Largest visible node summed light by light when near the point (see
+    /// [`NEAR_NODE_LIGHTS`]): 0 with interpolation, or with a budget, which
+    /// such a sum could spend at once.
+    near_lights: u32,
+    /// Whether visible lights are added one at a time to the compensated
+    /// sum (a target of 0, see [`Threshold::zero`]) rather than a few at a
+    /// time.
+    pub(crate) one_by_one: bool,
+    /// The share of a coarse sum its error may be for the sum to be kept
+    /// (`1/32` of a relative target), or `None` where coarse sums are not
+    /// used; where they are, children are bounded coarsely too.
+    pub(crate) coarse: Option<f64>,
+    /// For a small scene, its lights side by side (see
+    /// [`Point::sums_whole_scene`]); `None` for other trees.
+    pub(crate) small_lanes: Option<&'a [LightLanes]>,
+    /// Exact leaves and nodes that need no refinement.
+    pub(crate) settled: CompensatedSum,
+    /// The certified error of what was settled by coarse sums of lights.
+    pub(crate) settled_error: DVec3,
+    /// The shader's [`horizon`](Shader::horizon) at this point.
+    pub(crate) horizon: Option<Vec3>,
+    /// The last plane asked about and whether it lies at or below the
+    /// tangent plane (a coplanar node's descendants share its plane).
+    dark_plane: (u32, bool),
+    /// Children of the node being refined, waiting to be bounded together
+    /// (kept here so that it is set up once per call, not per refinement).
+    children: Children,
+}
+
+impl<'a, S: Shader> Point<'a, S> {
+    /// The region of the point `point` (as the host was given it) with
+    /// surface `surface`, for `threshold`.
+    #[inline(always)]
+    pub(crate) fn new(
+        shader: &S,
+        surface: &'a Surface,
+        point: Vec3,
+        threshold: &Threshold,
+        small_lanes: Option<&'a [LightLanes]>,
+    ) -> Self {
+        let interpolating = threshold.interpolation().is_some();
+        Self {
+            surface,
+            per_point: shader.prepare(surface),
+            point,
+            exact_lights: if interpolating { 0 } else { EXACT_NODE_LIGHTS },
+            near_lights: if interpolating || threshold.budget().is_some() {
+                0
+            } else {
+                NEAR_NODE_LIGHTS
+            },
+            one_by_one: threshold.is_zero(),
+            coarse: coarse_share(threshold),
+            small_lanes,
+            settled: CompensatedSum::default(),
+            settled_error: DVec3::ZERO,
+            horizon: shader.horizon(surface),
+            dark_plane: (NO_PLANE, false),
+            children: Children::default(),
+        }
+    }
+}
+
+/// The share of its sum a coarse sum's error may be for the sum to be kept
+/// (`1/32` of a relative target of at least [`COARSE_TARGET_MIN`], without
+/// interpolation), or `None` where the cut does not sum coarsely.
+#[inline(always)]
+pub(crate) fn coarse_share(threshold: &Threshold) -> Option<f64> {
+    match threshold.target() {
+        Target::Relative(t)
+            if threshold.interpolation().is_none() && t >= COARSE_TARGET_MIN && t.is_finite() =>
+        {
+            Some(t / COARSE_SHARE_DIVISOR)
+        }
+        _ => None,
+    }
+}
+
+impl<'a, S: Shader> Region<S> for Point<'a, S> {
+    #[inline(always)]
+    fn below_horizon<V: Visibility>(cut: &mut Cut<'_, S, V, Self>, plane: u32) -> bool {
+        let Some(normal) = cut.region.horizon else {
+            return false;
+        };
+        if cut.region.dark_plane.0 != plane {
+            let dark = cut
+                .tree
+                .plane_at_or_below(plane, cut.region.surface.point, normal);
+            cut.region.dark_plane = (plane, dark);
+        }
+        cut.region.dark_plane.1
+    }
+
+    /// A small node (see [`EXACT_NODE_LIGHTS`]), or one near the shading
+    /// point for its size and number of lights (see [`NEAR_NODE_LIGHTS`]).
+    #[inline(always)]
+    fn sums_exactly<V: Visibility>(cut: &Cut<'_, S, V, Self>, node: &Node) -> bool {
+        if node.radius == 0.0 {
+            return false;
+        }
+        let region = &cut.region;
+        if node.light_count <= region.exact_lights {
+            return true;
+        }
+        node.light_count <= region.near_lights
+            && is_near(
+                node,
+                (node.centroid.as_dvec3() - region.surface.point).length_squared(),
+            )
+    }
+
+    #[inline(always)]
+    fn light<V: Visibility>(
+        cut: &mut Cut<'_, S, V, Self>,
+        _leaf: usize,
+        position: Vec3,
+        intensity: DVec3,
+        seen: Seen,
+        weight: f64,
+    ) {
+        cut.exact_light(position, intensity, seen, weight);
+    }
+
+    #[inline(always)]
+    fn lights<V: Visibility>(
+        cut: &mut Cut<'_, S, V, Self>,
+        _leaf: usize,
+        range: core::ops::Range<usize>,
+        seen: Seen,
+        weight: f64,
+    ) {
+        cut.sum_lights(range, seen, weight);
+    }
+
+    #[inline(always)]
+    fn enter<V: Visibility>(
+        cut: &mut Cut<'_, S, V, Self>,
+        index: usize,
+        visible: bool,
+        weight: f64,
+    ) -> Option<Entry> {
+        let node = &cut.tree.nodes[index];
+        match node.cone(cut.region.surface.point) {
+            Some(cone) => {
+                let region = &cut.region;
+                let bound = cut
+                    .shader
+                    .bound(&region.per_point, region.surface, node, &cone);
+                cut.bounded(index, visible, weight, &bound)
+            }
+            None => Some(cut.unbounded(index, visible)),
+        }
+    }
+
+    /// Together and coarsely where the threshold allows and the shader can
+    /// ([`Shader::bound_children_coarse`]), else under their cones, up to
+    /// [`CHILDREN`] side by side ([`Shader::bound_nodes`]).
+    #[inline(always)]
+    fn bound_children<V: Visibility>(
+        cut: &mut Cut<'_, S, V, Self>,
+        parent: usize,
+        wanted: u8,
+        visible: bool,
+        weight: f64,
+        pending: &mut impl Pending,
+    ) {
+        let tree = cut.tree;
+        let first = tree.nodes[parent].first_child as usize;
+        let lanes = (0..CHILDREN).filter(|i| wanted & (1 << i) != 0);
+        if cut.region.coarse.is_some() && cut.work.nodes <= COARSE_NODES_MAX {
+            let mut bounds = [None; CHILDREN];
+            let region = &cut.region;
+            if cut.shader.bound_children_coarse(
+                Seal,
+                &region.per_point,
+                region.surface,
+                tree,
+                parent,
+                wanted,
+                &mut bounds,
+            ) {
+                for i in lanes {
+                    let entry = match &bounds[i] {
+                        Some(bound) => cut.bounded(first + i, visible, weight, bound),
+                        None => Some(cut.unbounded(first + i, visible)),
+                    };
+                    if let Some(entry) = entry {
+                        pending.pending(entry);
+                    }
+                }
+                return;
+            }
+        }
+        for i in lanes {
+            let child = first + i;
+            match tree.nodes[child].cone(cut.region.surface.point) {
+                Some(cone) => cut.region.children.push(child as u32, cone),
+                None => pending.pending(cut.unbounded(child, visible)),
+            }
+        }
+        cut.bound_waiting(visible, weight, pending);
+    }
+
+    #[inline(always)]
+    fn sums<V: Visibility>(cut: &mut Cut<'_, S, V, Self>, list: &mut ErrorList) -> (DVec3, DVec3) {
+        let (estimate, error) = list.sums();
+        (
+            cut.region.settled.value() + estimate,
+            error + cut.region.settled_error,
+        )
+    }
+
+    #[inline(always)]
+    fn confirmed<V: Visibility>(
+        cut: &mut Cut<'_, S, V, Self>,
+        list: &mut ErrorList,
+    ) -> (DVec3, DVec3) {
+        let (estimate, error) = list.resum();
+        (
+            cut.region.settled.value() + estimate,
+            reported_bound(error + cut.region.settled_error),
+        )
+    }
+
+    /// Whether refining `node` (its children or its lights) fits in the
+    /// budget, `visible` saying whether the node is known visible (its
+    /// small children are then summed light by light).
+    #[inline(always)]
+    fn affordable<V: Visibility>(
+        cut: &Cut<'_, S, V, Self>,
+        _list: &ErrorList,
+        node: &Node,
+        visible: bool,
+    ) -> bool {
+        if cut.budget == u32::MAX {
+            // No budget: every cost fits (the sum below saturates at it).
+            return true;
+        }
+        let cost = if node.is_leaf() {
+            node.light_count
+        } else if Cut::<S, V, Self>::known(visible) {
+            cut.tree.nodes[node.children()]
+                .iter()
+                .map(|c| {
+                    if Self::sums_exactly(cut, c) {
+                        c.light_count
+                    } else {
+                        1
+                    }
+                })
+                .sum()
+        } else {
+            node.child_count
+        };
+        cut.work.cost().saturating_add(cost) <= cut.budget
+    }
+
+    #[inline(always)]
+    fn taken<V: Visibility>(_cut: &mut Cut<'_, S, V, Self>, _slot: u32) {}
+
+    /// A small scene (see [`SMALL_SCENE_LIGHTS`], or
+    /// [`SMALL_SCENE_LIGHTS_COARSE`] where the lights are summed coarsely),
+    /// within the budget, no interpolation (whose blend needs bounded
+    /// nodes), and a target above 0 (with a target of 0 the cut refines as
+    /// usual, so that it adds the lights in the order the exact sum does).
+    #[inline(always)]
+    fn sums_whole_scene<V: Visibility>(cut: &Cut<'_, S, V, Self>, nested: bool) -> bool {
+        let region = &cut.region;
+        let most = if region.coarse.is_some() {
+            SMALL_SCENE_LIGHTS_COARSE
+        } else {
+            SMALL_SCENE_LIGHTS
+        };
+        !nested
+            && region.small_lanes.is_some()
+            && cut.tree.nodes[0].light_count <= most
+            && region.exact_lights > 0
+            && !region.one_by_one
+            && cut
+                .work
+                .cost()
+                .saturating_add(cut.tree.nodes[0].light_count)
+                <= cut.budget
+    }
+
+    /// As [`shade_small_scene`] does without a host, wherever the point
+    /// lies: a tiny scene summed coarsely.
+    #[inline(always)]
+    fn summed_on_visible_root<V: Visibility>(cut: &mut Cut<'_, S, V, Self>) -> bool {
+        let tiny = cut.region.coarse.is_some()
+            && cut
+                .region
+                .small_lanes
+                .is_some_and(|lanes| super::lights::tiny_scene(cut.tree, lanes))
+            && Self::sums_whole_scene(cut, false);
+        if tiny {
+            let lights = cut.tree.nodes[0].lights();
+            cut.sum_lights(lights, Seen::Visible, 1.0);
+        }
+        tiny
+    }
+
+    #[inline(always)]
+    fn sums_in_runs<V: Visibility>(cut: &Cut<'_, S, V, Self>) -> bool {
+        !cut.region.one_by_one
+    }
+
+    #[inline(always)]
+    fn settle<V: Visibility>(cut: &mut Cut<'_, S, V, Self>, value: DVec3) {
+        cut.region.settled.add(value);
+    }
+
+    #[inline(always)]
+    fn host_point<V: Visibility>(cut: &Cut<'_, S, V, Self>) -> Vec3 {
+        cut.region.point
+    }
+
+    #[inline(always)]
+    fn nested<V: Visibility>(
+        cut: &mut Cut<'_, S, V, Self>,
+        nesting: &mut Nesting,
+        frame: u32,
+        f: impl FnOnce(&mut Cut<'_, S, V, Self>, &mut Nesting),
+    ) {
+        let outer = core::mem::take(&mut cut.region.settled);
+        f(cut, nesting);
+        let settled = core::mem::replace(&mut cut.region.settled, outer).value();
+        cut.region.settled.add(settled);
+        nesting.settled(frame, settled);
+    }
+
+    #[inline(always)]
+    fn settled_outside<V: Visibility>(cut: &mut Cut<'_, S, V, Self>, nesting: &mut Nesting) {
+        nesting.settled(NO_PARENT, cut.region.settled.value());
+    }
+}
+
+impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
+    /// The entry of node `index` when it has no finite bound (its ball
+    /// reaches the shading point): refined before any other.
+    #[inline(always)]
+    pub(crate) fn unbounded(&self, index: usize, visible: bool) -> Entry {
+        Entry::new(
+            Class::Unbounded,
+            index as u32,
+            seen(Self::known(visible)),
+            DVec3::ZERO,
+            DVec3::ZERO,
+        )
+    }
+
+    /// The entry of node `index` with its certified interval `bound`; an
+    /// entry with nothing to gain by refining is settled (times `weight`)
+    /// instead.
+    #[inline(always)]
+    pub(crate) fn bounded(
+        &mut self,
+        index: usize,
+        visible: bool,
+        weight: f64,
+        bound: &NodeEstimate,
+    ) -> Option<Entry> {
+        let over = self
+            .max_contribution
+            .is_some_and(|m| bound.upper.max_element() > m);
+        let class = if over {
+            Class::OverContribution
+        } else {
+            Class::Error
+        };
+        let seen = seen(Self::known(visible));
+        let entry = Entry::new(class, index as u32, seen, bound.estimate, bound.error());
+        if entry.key <= 0.0 && !over {
+            // Nothing to gain by refining (e.g. below the horizon).
+            self.region.settled.add(entry.counted().0 * weight);
+            return None;
+        }
+        Some(entry)
+    }
+
+    /// Bounds the nodes waiting in the region's children together
+    /// ([`Shader::bound_nodes`]) and empties it; entries that stay in the
+    /// cut are passed to `pending`.
+    #[inline(always)]
+    fn bound_waiting(&mut self, visible: bool, weight: f64, pending: &mut impl Pending) {
+        let len = self.region.children.len;
+        if len == 0 {
+            return;
+        }
+        let tree = self.tree;
+        let region = &mut self.region;
+        let children = &mut region.children;
+        let nodes: [&Node; CHILDREN] = crate::lanes::array(&tree.nodes[0], |i| {
+            &tree.nodes[children.indices[i.min(len - 1)] as usize]
+        });
+        self.shader.bound_nodes(
+            &region.per_point,
+            region.surface,
+            &nodes[..len],
+            &children.cones[..len],
+            &mut children.bounds[..len],
+        );
+        children.len = 0;
+        for i in 0..len {
+            let (index, bound) = (
+                self.region.children.indices[i],
+                self.region.children.bounds[i],
+            );
+            if let Some(entry) = self.bounded(index as usize, visible, weight, &bound) {
+                pending.pending(entry);
+            }
+        }
+    }
+}
+
+/// The most children bounded together: an octree's.
+const CHILDREN: usize = 8;
+
+/// Children of a node waiting to be bounded together.
+struct Children {
+    len: usize,
+    indices: [u32; CHILDREN],
+    cones: [Cone; CHILDREN],
+    /// Their bounds, once bounded.
+    bounds: [NodeEstimate; CHILDREN],
+}
+
+impl Default for Children {
+    #[inline(always)]
+    fn default() -> Self {
+        const NONE: Cone = Cone {
+            offset: DVec3::ZERO,
+            distance: 0.0,
+            inv_distance: 0.0,
+            axis: DVec3::ZERO,
+            radius: 0.0,
+            sin_half_angle: 0.0,
+            cos_half_angle: 0.0,
+        };
+        Self {
+            len: 0,
+            indices: [0; CHILDREN],
+            cones: [NONE; CHILDREN],
+            bounds: [NodeEstimate::ZERO; CHILDREN],
+        }
+    }
+}
+
+impl Children {
+    #[inline(always)]
+    fn push(&mut self, index: u32, cone: Cone) {
+        self.indices[self.len] = index;
+        self.cones[self.len] = cone;
+        self.len += 1;
+    }
+}
+
+/// The certified bound reported for a summed error: the error list's sums
+/// carry their own rounding bound ([`ErrorList::resum`]) and the settled
+/// compensated sum is within a few ulps of its magnitude, which the rounding
+/// allowance of the exact value covers (its terms are non-negative); the
+/// rounding of the last additions (settled plus waiting, estimate plus
+/// error) is folded in here.
+#[inline]
+pub(crate) fn reported_bound(error: DVec3) -> DVec3 {
+    error * (1.0 + SUM_SLACK)
+}
+
+/// What a point's scratch holds between calls: the error list, the nesting
+/// of an interpolated cut and the blend's items.
+#[derive(Debug, Default)]
+pub(crate) struct PointScratch {
+    pub(crate) list: ErrorList,
+    pub(crate) nesting: Nesting,
+    pub(crate) items: Vec<Item>,
+}
+
+/// Shades one point: the cut through `tree` for `shader` at `surface`
+/// (`point` as the host gave it) until `threshold` is met, with the
+/// interpolation across levels where it asks for one. Inlined into each
+/// compiled copy of the shading call.
+#[inline(always)]
+pub(crate) fn shade_point<S: Shader, V: Visibility>(
+    tree: &LightTree,
+    shader: &S,
+    small_lanes: Option<&[LightLanes]>,
+    (surface, point): (&Surface, Vec3),
+    threshold: &Threshold,
+    visibility: V,
+    scratch: &mut PointScratch,
+) -> ShadeResult {
+    if let Some(lanes) = small_lanes
+        && let Some(result) =
+            super::lights::shade_small_scene::<S, V>(tree, shader, lanes, surface, threshold)
+    {
+        return result;
+    }
+    let region = Point::new(shader, surface, point, threshold, small_lanes);
+    let mut cut = Cut::new(tree, shader, region, threshold, visibility);
+    let PointScratch {
+        list,
+        nesting,
+        items,
+    } = scratch;
+    let interpolating = threshold.interpolation().is_some();
+    cut.enter_root(list, interpolating.then_some(&mut *nesting));
+    let outcome: Outcome = cut.run(list, threshold, interpolating.then_some(&mut *nesting));
+    let unbounded = list.has_unbounded();
+    let (mut radiance, mut bound) = if interpolating && !unbounded {
+        // Each refined node's interval intersected with its children's.
+        outcome.confirmed.unwrap_or_else(|| nesting.fold(list))
+    } else {
+        let (estimate, error) = list.resum();
+        (
+            cut.region.settled.value() + estimate,
+            reported_bound(error + cut.region.settled_error),
+        )
+    };
+    if let (Some(band), Stop::ThresholdMet) = (threshold.interpolation(), outcome.stop) {
+        let top = list.largest();
+        let after = threshold.excess(radiance, bound, top);
+        // The blend's bound is re-checked; for the per-node target the
+        // blend refines no node less than the error list did, so the
+        // largest single error cannot grow.
+        if let Some((r, e)) = interpolate::interpolate(
+            &mut cut,
+            list,
+            nesting,
+            items,
+            threshold,
+            band,
+            outcome.last_step,
+            (top, after),
+        ) && threshold.met(r, e, 0.0)
+        {
+            (radiance, bound) = (r, e);
+        }
+    }
+    ShadeResult {
+        radiance,
+        error_bound: if unbounded { DVec3::INFINITY } else { bound },
+        nodes_evaluated: cut.work.nodes,
+        lights_evaluated: cut.work.lights,
+        classify_queries: cut.work.classify_queries,
+        point_queries: cut.work.point_queries,
+        stop: outcome.stop,
+    }
+}
