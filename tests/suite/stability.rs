@@ -1,8 +1,8 @@
 //! Stiff and extreme cases, one named test each. Every
 //! case asserts no panic, finite output (or a documented infinite bound),
-//! and the certified bound against `shade_exact`, for Lambert (both
-//! bounds), Phong over the extreme exponents, and their sum; or a clear
-//! error.
+//! and the certified bound against the exact sum (`Shading::exact_query`,
+//! or its one-line form `Shading::exact`), for Lambert (both bounds), Phong
+//! over the extreme exponents, and their sum; or a clear error.
 
 use glam::{DVec3, Vec3};
 use manylights::{
