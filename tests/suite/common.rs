@@ -34,17 +34,24 @@ pub const REGRESSIONS: &str = "../proptest-regressions/suite";
 /// A proptest configuration of `default` cases per property, which the
 /// `PROPTEST_CASES` environment variable overrides for long runs, keeping
 /// its failing cases under [`REGRESSIONS`] (and replaying those first).
+///
+/// A property that draws a case with nothing to check rejects it
+/// (`prop_assume!`) and draws another; it may reject as many cases as it
+/// runs, at least proptest's default of 1,024 (a fixed number, which a long
+/// run of a property that rejects a share of its draws would exceed).
 pub fn cases(default: u32) -> ProptestConfig {
     let cases = std::env::var("PROPTEST_CASES")
         .ok()
         .and_then(|c| c.parse().ok())
         .unwrap_or(default);
+    let defaults = ProptestConfig::default();
     ProptestConfig {
         cases,
+        max_global_rejects: defaults.max_global_rejects.max(cases),
         failure_persistence: Some(Box::new(FileFailurePersistence::SourceParallel(
             REGRESSIONS,
         ))),
-        ..ProptestConfig::default()
+        ..defaults
     }
 }
 
