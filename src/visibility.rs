@@ -57,7 +57,8 @@ pub struct PointGroup {
 ///   and [`Coverage::Occluded`] only if every such segment is blocked. When
 ///   unsure it returns [`Coverage::Partial`], which is always correct.
 /// * [`visible`](Self::visible) is the exact point-to-point visibility `V_i`
-///   that the model (and `shade_exact`) uses, and
+///   that the model (and its exact sum,
+///   [`Shading::exact_query`](crate::Shading::exact_query)) uses, and
 ///   [`visible_lights`](Self::visible_lights) answers as `visible` does.
 /// * [`classify_group`](Self::classify_group), for hosts that set
 ///   [`CLASSIFIES_GROUPS`](Self::CLASSIFIES_GROUPS), answers like `classify`

@@ -98,7 +98,8 @@ impl NodeEstimate {
 /// view-less shading calls.
 ///
 /// # Writing one
-/// `eval` must be the model (the crate's `shade_exact` sums it); `bound` may
+/// `eval` must be the model (the exact reference,
+/// [`Shading::exact_query`](crate::Shading::exact_query), sums it); `bound` may
 /// use the node's intensity, ball ([`Cone`]), weight, first and second
 /// moments ([`Node`]'s accessors document each). The simplest valid bound is
 /// the interval of the model over the ball: smallest and largest value of the

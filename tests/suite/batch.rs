@@ -6,7 +6,7 @@ use crate::common::{cases, check_bound, check_threshold, direction, lights, thre
 use glam::Vec3;
 use manylights::{
     Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query,
-    ShadeError, ShadeResult, Threshold, Unoccluded, Visibility,
+    ShadeError, ShadeResult, Shader, Stop, Threshold, Unoccluded, Visibility,
 };
 use proptest::prelude::*;
 
@@ -91,8 +91,10 @@ fn queries(points: &[(Vec3, Vec3)]) -> Vec<Query> {
         .collect()
 }
 
-/// Every result of a batch against the exact sum of its own query.
-fn check_batch<S: manylights::Shader + manylights::ViewIndependent + Copy>(
+/// Every result of a batch against the exact sum of its own query, and the
+/// batch's count of its points: each shaded once, through a shared cut or
+/// on its own, all on their own under a budget (which cannot share).
+fn check_batch<S: Shader + manylights::ViewIndependent + Copy>(
     light_set: &[PointLight],
     shader: S,
     points: &[(Vec3, Vec3)],
@@ -111,6 +113,16 @@ fn check_batch<S: manylights::Shader + manylights::ViewIndependent + Copy>(
             stats.shared_points, stats.points_alone, stats.groups
         );
     }
+    prop_assert_eq!(
+        (stats.shared_points + stats.points_alone) as usize,
+        qs.len(),
+        "{:?}",
+        stats
+    );
+    prop_assert!(stats.shared_points == 0 || stats.groups > 0, "{:?}", stats);
+    if t.budget().is_some() {
+        prop_assert_eq!(stats.points_alone as usize, qs.len(), "{:?}", stats);
+    }
     for (q, r) in qs.iter().zip(&results) {
         check_bound(r, shading.exact_query(q, Unoccluded))?;
         check_threshold(r, &t)?;
@@ -118,10 +130,14 @@ fn check_batch<S: manylights::Shader + manylights::ViewIndependent + Copy>(
     Ok(())
 }
 
-/// A result to be overwritten; it certifies nothing.
+/// A result to be overwritten. The default result's infinite bound would
+/// certify any value, so the radiance is NaN: a result left unwritten
+/// certifies nothing and fails every check of a finite radiance.
 fn placeholder() -> ShadeResult {
-    let r = ShadeResult::default();
-    assert!(r.error_bound.max_element() == f64::INFINITY && r.stop == manylights::Stop::Budget);
+    let mut r = ShadeResult::default();
+    assert!(r.error_bound.max_element() == f64::INFINITY && r.stop == Stop::Budget);
+    r.radiance = glam::DVec3::NAN;
+    assert!(!r.certifies(glam::DVec3::ZERO));
     r
 }
 
@@ -156,13 +172,17 @@ proptest! {
         check_batch(&light_set, Lambert::new(Vec3::new(0.6, 0.8, 0.4)), &points, t)?;
     }
 
+    /// A sum of two diffuse terms is diffuse, its albedo the sum of theirs
+    /// (so the batch may share its cuts), and keeps the contract.
     #[test]
-    fn two_diffuse_terms_share_as_one(
+    fn two_diffuse_terms_keep_the_contract(
         light_set in lights(1000),
         points in patch(),
         t in threshold(),
     ) {
-        let shader = Combined::new(Lambert::new(Vec3::splat(0.3)), Lambert::new(Vec3::new(0.1, 0.4, 0.0)));
+        let (a, b) = (Vec3::splat(0.3), Vec3::new(0.1, 0.4, 0.0));
+        let shader = Combined::new(Lambert::new(a), Lambert::new(b));
+        prop_assert_eq!(shader.diffuse_albedo(), Some(a.as_dvec3() + b.as_dvec3()));
         check_batch(&light_set, shader, &points, t)?;
     }
 
@@ -313,6 +333,61 @@ fn a_coherent_patch_shares_its_cuts_and_meets_its_threshold() {
     assert!(results.iter().all(|r| (r.cost() as usize) < 20_000));
 }
 
+/// Two diffuse terms are one to the batch: their albedos add
+/// ([`Shader::diffuse_albedo`]), and the pair shares its cuts over the
+/// street's patch point for point as one term of the summed albedo does,
+/// each result that term's up to the rounding of summing two terms. The
+/// albedos are sums exact in `f32`, so the one term's albedo is the pair's
+/// to the bit.
+#[test]
+fn two_diffuse_terms_share_as_one() {
+    let (tree, queries) = street_patch();
+    let (a, b) = (Vec3::new(0.5, 0.25, 0.375), Vec3::new(0.25, 0.5, 0.0));
+    let mut pair = tree.shading(Combined::new(Lambert::new(a), Lambert::new(b)));
+    let mut one = tree.shading(Lambert::new(a + b));
+    assert_eq!(
+        pair.shader().diffuse_albedo(),
+        one.shader().diffuse_albedo()
+    );
+    for t in [
+        Threshold::relative(0.01),
+        Threshold::relative(0.2),
+        Threshold::relative(0.01).with_interpolation(2.0),
+    ] {
+        let mut results = vec![placeholder(); queries.len()];
+        let stats = pair
+            .shade_batch(&queries, t, Unoccluded, &mut results)
+            .unwrap();
+        let mut expected = vec![placeholder(); queries.len()];
+        let one_stats = one
+            .shade_batch(&queries, t, Unoccluded, &mut expected)
+            .unwrap();
+        assert!(
+            stats.groups > 0 && stats.shared_points > 0,
+            "{t:?}: {stats:?}"
+        );
+        assert_eq!(stats, one_stats, "{t:?}");
+        for ((q, r), e) in queries.iter().zip(&results).zip(&expected) {
+            let exact = pair.exact_query(q, Unoccluded);
+            assert!(r.certifies(exact), "{t:?}: {r:?} against {exact}");
+            assert_eq!(r.stop, Stop::ThresholdMet, "{t:?}: {r:?}");
+            assert_eq!(
+                (r.nodes_evaluated, r.lights_evaluated),
+                (e.nodes_evaluated, e.lights_evaluated),
+                "{t:?} at {}",
+                q.point()
+            );
+            // Each within the rounding allowance of the same model value.
+            let slack = 2.0 * ShadeResult::ROUNDING_ALLOWANCE * exact;
+            assert!(
+                (r.radiance - e.radiance).abs().cmple(slack).all()
+                    && (r.error_bound - e.error_bound).abs().cmple(slack).all(),
+                "{t:?}: {r:?} against one term's {e:?}"
+            );
+        }
+    }
+}
+
 #[test]
 fn settings_that_cannot_share_give_the_single_point_results() {
     let (tree, queries) = street_patch();
@@ -420,11 +495,7 @@ fn the_parallel_batch_takes_empty_and_tiny_batches_and_checks_lengths() {
             .shade_batch_parallel(&queries[..n], t, Unoccluded, &mut parallel)
             .unwrap();
         assert_eq!((a, &serial), (b, &parallel), "{n} points");
-        assert!(
-            parallel
-                .iter()
-                .all(|r| r.stop == manylights::Stop::ThresholdMet)
-        );
+        assert!(parallel.iter().all(|r| r.stop == Stop::ThresholdMet));
     }
     let mut short = vec![placeholder(); 1];
     let error = shading.shade_batch_parallel(&queries[..2], t, Unoccluded, &mut short);

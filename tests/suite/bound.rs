@@ -1,5 +1,6 @@
-//! Property tests of the certified-bound contract against `shade_exact`, for
-//! Lambert (both bounds), Phong across exponents, and their sum.
+//! Property tests of the certified-bound contract against the exact sum
+//! (`Shading::exact_query`), for Lambert (both bounds), Phong across
+//! exponents, and their sum.
 
 use crate::common::*;
 use glam::Vec3;

@@ -18,17 +18,94 @@
 use glam::Vec3;
 use manylights::{PointLight, ShadeResult, Threshold};
 use proptest::prelude::*;
+use proptest::test_runner::FileFailurePersistence;
+
+/// Where the suite's failing cases are kept, as a proptest
+/// `SourceParallel` directory: proptest climbs from a module's file
+/// (`tests/suite/batch.rs`) to the directory holding `main.rs`
+/// (`tests/suite`), takes its parent (`tests`), and joins this and the
+/// file's path below `tests/suite` with `.txt`, so the seeds of
+/// `tests/suite/batch.rs` are in `proptest-regressions/suite/batch.txt` at
+/// the crate root: the directory where the unit tests of `src/` keep theirs
+/// by proptest's default (`src/phong.rs` in
+/// `proptest-regressions/phong.txt`).
+pub const REGRESSIONS: &str = "../proptest-regressions/suite";
 
 /// A proptest configuration of `default` cases per property, which the
-/// `PROPTEST_CASES` environment variable overrides for long runs.
+/// `PROPTEST_CASES` environment variable overrides for long runs, keeping
+/// its failing cases under [`REGRESSIONS`] (and replaying those first).
+///
+/// A property that draws a case with nothing to check rejects it
+/// (`prop_assume!`) and draws another; it may reject as many cases as it
+/// runs, at least proptest's default of 1,024 (a fixed number, which a long
+/// run of a property that rejects a share of its draws would exceed).
 pub fn cases(default: u32) -> ProptestConfig {
     let cases = std::env::var("PROPTEST_CASES")
         .ok()
         .and_then(|c| c.parse().ok())
         .unwrap_or(default);
+    let defaults = ProptestConfig::default();
     ProptestConfig {
         cases,
-        ..ProptestConfig::default()
+        max_global_rejects: defaults.max_global_rejects.max(cases),
+        failure_persistence: Some(Box::new(FileFailurePersistence::SourceParallel(
+            REGRESSIONS,
+        ))),
+        ..defaults
+    }
+}
+
+/// Seed lines (`cc <seed>`) of a proptest regression file.
+fn seed_lines(file: &std::path::Path) -> usize {
+    std::fs::read_to_string(file)
+        .unwrap_or_else(|e| panic!("{}: {e}", file.display()))
+        .lines()
+        .filter(|line| line.starts_with("cc "))
+        .count()
+}
+
+/// The regression files under `dir`, recursively, their paths below it
+/// without `.txt`.
+fn regression_files(dir: &std::path::Path, below: &str, out: &mut Vec<String>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_str().unwrap();
+        let relative = format!("{below}{name}");
+        if path.is_dir() {
+            regression_files(&path, &format!("{relative}/"), out);
+        } else if let Some(stem) = relative.strip_suffix(".txt") {
+            out.push(stem.to_owned());
+        }
+    }
+}
+
+/// Every seed of `proptest-regressions/` is replayed: proptest, handed a
+/// test's source file as its `proptest!` block hands it (`file!()`, a path
+/// from the crate root), reads each file with all its seeds, the suite's
+/// through [`cases`] and the unit tests' through proptest's default.
+#[test]
+fn every_saved_seed_is_read_back() {
+    use proptest::test_runner::FailurePersistence;
+    let regressions = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("proptest-regressions");
+    let mut files = Vec::new();
+    regression_files(&regressions, "", &mut files);
+    assert!(!files.is_empty(), "no regression files");
+    for file in &files {
+        let (persistence, source) = match file.strip_prefix("suite/") {
+            Some(module) => (
+                cases(1).failure_persistence.unwrap(),
+                format!("tests/suite/{module}.rs"),
+            ),
+            None => (
+                Box::new(FileFailurePersistence::default()) as Box<dyn FailurePersistence>,
+                format!("src/{file}.rs"),
+            ),
+        };
+        let source: &'static str = Box::leak(source.into_boxed_str());
+        let seeds = seed_lines(&regressions.join(format!("{file}.txt")));
+        let read = persistence.load_persisted_failures2(Some(source)).len();
+        assert!(seeds > 0, "{file}.txt holds no seed");
+        assert_eq!(read, seeds, "seeds of {file}.txt read for {source}");
     }
 }
 

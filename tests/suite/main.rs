@@ -2,8 +2,9 @@
 //! is compiled once rather than once per file.
 //!
 //! * `bound`, `batch`, `visibility`, `grazing`, `interpolation`: property
-//!   tests of the certified-bound contract against `shade_exact` (long runs:
-//!   `PROPTEST_CASES=100000`, see [`common::cases`]).
+//!   tests of the certified-bound contract against the exact sum,
+//!   `Shading::exact_query` (long runs: `PROPTEST_CASES=100000`, see
+//!   [`common::cases`]).
 //! * `node_bound`: the node bounds and the `f32` light sums against `f64`
 //!   references.
 //! * `stability`: stiff and extreme inputs.

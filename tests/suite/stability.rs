@@ -1,8 +1,8 @@
 //! Stiff and extreme cases, one named test each. Every
 //! case asserts no panic, finite output (or a documented infinite bound),
-//! and the certified bound against `shade_exact`, for Lambert (both
-//! bounds), Phong over the extreme exponents, and their sum; or a clear
-//! error.
+//! and the certified bound against the exact sum (`Shading::exact_query`,
+//! or its one-line form `Shading::exact`), for Lambert (both bounds), Phong
+//! over the extreme exponents, and their sum; or a clear error.
 
 use glam::{DVec3, Vec3};
 use manylights::{
@@ -113,8 +113,13 @@ fn check_batch(tree: &LightTree, lights: &[PointLight], p: Vec3, n: Vec3) {
         .map(|q| Query::new(q, n).unwrap())
         .collect();
     let mut s = tree.shading(Lambert::new(Vec3::new(0.9, 0.5, 0.2)));
-    let mut results = vec![s.shade(p, n, Threshold::zero()).unwrap(); queries.len()];
+    // Each call writes over results that certify nothing (a NaN radiance),
+    // so that a result left unwritten fails.
+    let mut unwritten = ShadeResult::default();
+    unwritten.radiance = DVec3::NAN;
+    let mut results = vec![unwritten; queries.len()];
     for t in thresholds() {
+        results.fill(unwritten);
         s.shade_batch(&queries, t, Unoccluded, &mut results)
             .unwrap();
         for (q, r) in queries.iter().zip(&results) {

@@ -5,11 +5,12 @@
 //! box of the shaft from the shading point to the node's box, `Occluded` when
 //! one occluder provably blocks every segment of the shaft, `Partial`
 //! otherwise; point-to-point visibility is an exact segment-versus-box slab
-//! test. The certified-bound contract must hold against
-//! `shade_exact_occluded` / `shade_exact_view_occluded` for every threshold,
-//! an unoccluded host must cost nothing, occluded nodes must contribute
-//! exactly zero, threshold 0 must give the shadowed sum, and a host's visible
-//! fraction may move the estimate but never break the bound.
+//! test. The certified-bound contract must hold against the exact shadowed
+//! sum (`Shading::exact_query` with the same host, with and without a view)
+//! for every threshold, an unoccluded host must cost nothing, occluded nodes
+//! must contribute exactly zero, threshold 0 must give the shadowed sum, and
+//! a host's visible fraction may move the estimate but never break the
+//! bound.
 
 use crate::common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::{DVec3, Vec3};
