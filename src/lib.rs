@@ -184,13 +184,13 @@ mod testing;
 mod tree;
 mod visibility;
 
+pub use cut::{ShadeResult, Stop, Target, Threshold};
 pub use error::{BuildError, ShadeError, ValidationError};
 pub use geometry::{Aabb, Cone, Surface};
 pub use lambert::{BoundKind, Lambert};
 pub use light::{LightLanes, PointLight};
 pub use phong::{Mirror, Phong};
 pub use shader::{Combined, NodeEstimate, Shader, ViewIndependent};
-pub use cut::{ShadeResult, Stop, Target, Threshold};
 pub use shading::{Accepts, BatchStats, NoView, Query, Shading, WithView};
 pub use tree::{LightTree, Node, TreeBuilder};
 pub use visibility::{Coverage, NodeRegion, PointGroup, Unoccluded, Visibility};

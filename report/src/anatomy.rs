@@ -23,8 +23,8 @@ use std::error::Error;
 
 use glam::{DVec3, Vec3};
 use manylights::{
-    BoundKind, Cone, Lambert, LightTree, Node, NodeEstimate, PointLight, Shader,
-    Surface, Threshold, Unoccluded,
+    BoundKind, Cone, Lambert, LightTree, Node, NodeEstimate, PointLight, Shader, Surface,
+    Threshold, Unoccluded,
 };
 
 use crate::config::{SCALING_RELATIVE, SEED};

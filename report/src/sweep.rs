@@ -308,7 +308,9 @@ fn sweep<S: Shader + Copy + Send + Sync>(
 ) -> Result<Vec<Record>, Box<dyn Error>> {
     let (tree, build) = build_tree(scene)?;
     print_header(scene, &tree, build);
-    let (points, refs) = references(&tree, make(BoundKind::Series), &scene.points, |_| Unoccluded);
+    let (points, refs) = references(&tree, make(BoundKind::Series), &scene.points, |_| {
+        Unoccluded
+    });
     let dropped = scene.points.len() - points.len();
     let median_radiance = median(refs.iter().map(|r| r.max_element()).collect());
     let soa = SoaLights::new(&scene.lights);

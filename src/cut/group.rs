@@ -487,9 +487,8 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
         let scratch = &*region.scratch;
         let entries = scratch.across.len() + scratch.above.len() + list.len();
         let rays = scratch.shadowed.len() as u64 * region.points;
-        let cost = u64::from(cut.work.nodes)
-            + rays
-            + entries as u64 * region.points / ENTRIES_PER_BOUND;
+        let cost =
+            u64::from(cut.work.nodes) + rays + entries as u64 * region.points / ENTRIES_PER_BOUND;
         cost <= region.points * region.budget_per_point && entries <= MAX_SHARED_ENTRIES
     }
 
@@ -792,5 +791,4 @@ impl<'s, S: Shader, V: Visibility> Cut<'_, S, V, Shared<'s>> {
         region.light_error = mark.light_error;
         region.steer_settled = mark.steer;
     }
-
 }

@@ -672,7 +672,8 @@ fn expand<S: Shader, V: Visibility>(
             (it.node, it.visible, it.key, it.frame)
         };
         let tree = cut.tree;
-        if !<Point<'_, S> as Region<S>>::affordable(cut, list, &tree.nodes[node as usize], visible) {
+        if !<Point<'_, S> as Region<S>>::affordable(cut, list, &tree.nodes[node as usize], visible)
+        {
             return false;
         }
         let parent = next as u32;

@@ -27,7 +27,13 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
     /// enters the cut only when its node is refined, and one ray settles it
     /// exactly); dark lights and lights behind the surface need no ray.
     #[inline(always)]
-    pub(crate) fn exact_light(&mut self, position: Vec3, intensity: DVec3, seen: Seen, weight: f64) {
+    pub(crate) fn exact_light(
+        &mut self,
+        position: Vec3,
+        intensity: DVec3,
+        seen: Seen,
+        weight: f64,
+    ) {
         let value = self.shader.eval(
             &self.region.per_point,
             self.region.surface,
@@ -53,9 +59,6 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
         }
         self.region.settled.add(value * weight);
     }
-
-
-
 
     /// Each light of `range` (leaf order) exactly, see
     /// [`exact_light`](Self::exact_light).
@@ -218,10 +221,12 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
     /// [`sum_visible`](Self::sum_visible). The caller counts the lights.
     #[inline(always)]
     fn sum_seen_coarse(&mut self, lights: &[PointLight], share: f64, weight: f64) {
-        match self
-            .shader
-            .sum_lights_coarse(Seal, &self.region.per_point, self.region.surface, lights)
-        {
+        match self.shader.sum_lights_coarse(
+            Seal,
+            &self.region.per_point,
+            self.region.surface,
+            lights,
+        ) {
             Some((sum, error)) if error.cmple(sum * share).all() => {
                 self.region.settled.add(sum * weight);
                 self.region.settled_error += error * weight;
@@ -235,7 +240,8 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
     /// [`Shader::sum_lights`]). The caller counts the lights.
     #[inline(always)]
     fn sum_visible(&mut self, lights: &[PointLight], weight: f64) {
-        let (shader, per_point, surface) = (self.shader, &self.region.per_point, self.region.surface);
+        let (shader, per_point, surface) =
+            (self.shader, &self.region.per_point, self.region.surface);
         settle_visible(
             shader,
             per_point,
@@ -339,7 +345,6 @@ pub(crate) fn tiny_scene(tree: &LightTree, lanes: &[LightLanes]) -> bool {
             .is_some_and(|root| root.light_count as usize <= TINY_SCENE_LIGHTS)
         && tree.node_plane(0).is_none()
 }
-
 
 /// The cut of a small scene whose lights are known visible (`lanes` side
 /// by side, see `Point::sums_whole_scene`), summed without setting up the

@@ -8,8 +8,8 @@ use super::engine::{Cut, Outcome, Pending, Region, seen};
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::interpolate::{self, Item, NO_PARENT, Nesting};
 use super::policy::{
-    COARSE_NODES_MAX, COARSE_SHARE_DIVISOR, COARSE_TARGET_MIN, EXACT_NODE_LIGHTS,
-    NEAR_NODE_LIGHTS, SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE, is_near,
+    COARSE_NODES_MAX, COARSE_SHARE_DIVISOR, COARSE_TARGET_MIN, EXACT_NODE_LIGHTS, NEAR_NODE_LIGHTS,
+    SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE, is_near,
 };
 use super::result::{ShadeResult, Stop};
 use super::threshold::{Target, Threshold};

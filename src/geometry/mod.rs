@@ -8,6 +8,6 @@ mod surface;
 
 pub use aabb::Aabb;
 pub use cone::Cone;
-pub(crate) use group::{GroupBounds, Side};
 pub use group::GroupView;
+pub(crate) use group::{GroupBounds, Side};
 pub use surface::Surface;

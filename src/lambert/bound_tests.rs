@@ -366,7 +366,15 @@ fn check_coarse(
     let siblings = tree.nodes()[parent].children().len();
     for wanted in [1u8 << lane, ((1u16 << siblings) - 1) as u8] {
         let mut out = [Some(NodeEstimate::ZERO); 8];
-        prop_assert!(shader.bound_children_coarse(Seal, &(), surface, tree, parent, wanted, &mut out));
+        prop_assert!(shader.bound_children_coarse(
+            Seal,
+            &(),
+            surface,
+            tree,
+            parent,
+            wanted,
+            &mut out
+        ));
         let Some(bound) = out[lane] else {
             // No finite bound: exactly where the f64 bound has none.
             prop_assert!(false, "no coarse bound where the cone exists");
@@ -460,7 +468,15 @@ fn check_combined_coarse(
     let combined = Combined::new(lambert, phong);
     let at = combined.prepare(&surface);
     let mut out = [None; 8];
-    prop_assert!(combined.bound_children_coarse(Seal, &at, &surface, tree, parent, 1 << lane, &mut out));
+    prop_assert!(combined.bound_children_coarse(
+        Seal,
+        &at,
+        &surface,
+        tree,
+        parent,
+        1 << lane,
+        &mut out
+    ));
     let mut diffuse = [None; 8];
     prop_assert!(lambert.bound_children_coarse(
         Seal,

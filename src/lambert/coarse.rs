@@ -656,6 +656,7 @@ mod tests {
     use super::{COARSE_MAX, U, sum_baseline};
     use crate::dispatch::baseline;
     use crate::geometry::Surface;
+    use crate::shader::Seal;
     use crate::{Lambert, PointLight, Shader};
 
     /// Both copies, which must agree bit for bit.
@@ -664,8 +665,8 @@ mod tests {
         surface: &Surface,
         lights: &[PointLight],
     ) -> Option<(DVec3, DVec3)> {
-        let sum = lambert.sum_lights_coarse(&(), surface, lights);
-        let base = baseline(|| lambert.sum_lights_coarse(&(), surface, lights));
+        let sum = lambert.sum_lights_coarse(Seal, &(), surface, lights);
+        let base = baseline(|| lambert.sum_lights_coarse(Seal, &(), surface, lights));
         assert_eq!(bits(sum), bits(base));
         sum
     }
@@ -724,14 +725,17 @@ mod tests {
             let lanes = crate::LightLanes::of(&lights);
             assert_eq!(lanes.len(), count.div_ceil(8));
             let aos = bits(coarse(&lambert, &surface, &lights));
-            let soa = lambert.sum_lanes_coarse(&(), &surface, &lanes, count);
-            let base = baseline(|| lambert.sum_lanes_coarse(&(), &surface, &lanes, count));
+            let soa = lambert.sum_lanes_coarse(Seal, &(), &surface, &lanes, count);
+            let base = baseline(|| lambert.sum_lanes_coarse(Seal, &(), &surface, &lanes, count));
             assert_eq!(bits(soa), aos, "round {round}, {count} lights");
             assert_eq!(bits(base), aos, "round {round}, {count} lights");
             kept += usize::from(aos.is_some());
             if count > 8 {
                 let short = &lanes[..lanes.len() - 1];
-                assert_eq!(lambert.sum_lanes_coarse(&(), &surface, short, count), None);
+                assert_eq!(
+                    lambert.sum_lanes_coarse(Seal, &(), &surface, short, count),
+                    None
+                );
             }
         }
         // A quarter of the rounds has every light in range.
@@ -861,12 +865,15 @@ mod tests {
                 out_of_range(light, p, odd);
             }
             let lanes = crate::LightLanes::of(&lights);
-            let sum = lambert.sum_scene_coarse(&(), &surface, &lanes, count);
-            let base = baseline(|| lambert.sum_scene_coarse(&(), &surface, &lanes, count));
+            let sum = lambert.sum_scene_coarse(Seal, &(), &surface, &lanes, count);
+            let base = baseline(|| lambert.sum_scene_coarse(Seal, &(), &surface, &lanes, count));
             assert_eq!(bits(sum), bits(base), "round {round}, {count} lights");
             if count > 8 {
                 let short = &lanes[..lanes.len() - 1];
-                assert_eq!(lambert.sum_scene_coarse(&(), &surface, short, count), None);
+                assert_eq!(
+                    lambert.sum_scene_coarse(Seal, &(), &surface, short, count),
+                    None
+                );
             }
             let refused = count > 0 && (1..=3).contains(&odd);
             assert_eq!(sum.is_none(), refused, "round {round}, {count} lights");

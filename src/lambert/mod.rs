@@ -1320,6 +1320,7 @@ mod tests {
 
     use super::{BoundKind, Lambert};
     use crate::dispatch::baseline;
+    use crate::shader::Seal;
     use crate::{
         Combined, Cone, LightTree, Node, NodeEstimate, Phong, PointLight, Shader, Surface,
     };
@@ -1518,8 +1519,8 @@ mod tests {
                 ));
             }
             let exact = exact.value();
-            let sum = lambert.sum_lights(&(), &surface, &lights);
-            let baseline = baseline(|| lambert.sum_lights(&(), &surface, &lights));
+            let sum = lambert.sum_lights(Seal, &(), &surface, &lights);
+            let baseline = baseline(|| lambert.sum_lights(Seal, &(), &surface, &lights));
             assert_eq!(
                 sum.to_array().map(f64::to_bits),
                 baseline.to_array().map(f64::to_bits)

@@ -148,12 +148,24 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         let mut second = [None; crate::tree::MAX_CHILDREN];
         // Into scratch, so that `out` is left alone if neither term has
         // coarse bounds.
-        let first_coarse =
-            self.first
-                .bound_children_coarse(Seal, &p.0, s, tree, parent, wanted, &mut first[..len]);
-        let second_coarse =
-            self.second
-                .bound_children_coarse(Seal, &p.1, s, tree, parent, wanted, &mut second[..len]);
+        let first_coarse = self.first.bound_children_coarse(
+            Seal,
+            &p.0,
+            s,
+            tree,
+            parent,
+            wanted,
+            &mut first[..len],
+        );
+        let second_coarse = self.second.bound_children_coarse(
+            Seal,
+            &p.1,
+            s,
+            tree,
+            parent,
+            wanted,
+            &mut second[..len],
+        );
         if !first_coarse && !second_coarse {
             return false;
         }
@@ -241,4 +253,3 @@ fn summed<S: Shader>(shader: &S, p: &S::PerPoint, s: &Surface, lights: &[PointLi
 }
 
 impl<A: ViewIndependent, B: ViewIndependent> ViewIndependent for Combined<A, B> {}
-

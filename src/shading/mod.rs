@@ -11,8 +11,8 @@ use core::fmt;
 
 use glam::{DVec3, Vec3};
 
-use crate::cut::{GroupScratch, shade_point};
 use crate::cut::policy::is_small_scene;
+use crate::cut::{GroupScratch, shade_point};
 use crate::shader::{Shader, ViewIndependent};
 use crate::tree::LightTree;
 use crate::visibility::{Unoccluded, Visibility};
@@ -202,10 +202,10 @@ mod tests {
     use glam::Vec3;
 
     use super::Query;
-    use crate::{ShadeResult, Threshold};
     use crate::{Lambert, LightTree, PointLight, Unoccluded};
+    use crate::{ShadeResult, Threshold};
 
-    fn bits(r: &ShadeResult) -> ([u64; 3], [u64; 3], [u32; 4], super::Stop) {
+    fn bits(r: &ShadeResult) -> ([u64; 3], [u64; 3], [u32; 4], crate::Stop) {
         (
             r.radiance.to_array().map(f64::to_bits),
             r.error_bound.to_array().map(f64::to_bits),

@@ -224,8 +224,7 @@ impl<S: Shader> Shading<'_, S> {
             ..
         } = self;
         let (tree, batch) = (*tree, &mut scratch.batch);
-        let budget_per_point =
-            ((BUDGET_SHARE * batch.alone_cost) as u64).max(MIN_BUDGET_PER_POINT);
+        let budget_per_point = ((BUDGET_SHARE * batch.alone_cost) as u64).max(MIN_BUDGET_PER_POINT);
         let region = Shared::new(
             kd,
             (group, samples),
@@ -273,7 +272,13 @@ impl<S: Shader> Shading<'_, S> {
                     continue;
                 }
                 let query = &queries[i as usize];
-                let r = over.result(point_sum(&*shader, &shared, &batch.packed, query, cut.visibility));
+                let r = over.result(point_sum(
+                    &*shader,
+                    &shared,
+                    &batch.packed,
+                    query,
+                    cut.visibility,
+                ));
                 let alone = !threshold.met(r.radiance, r.error_bound, largest);
                 (batch.results[k], batch.alone[k]) = (r, alone);
                 if alone {
@@ -440,4 +445,3 @@ pub(crate) fn packed_bound(error: DVec3, entries: usize) -> DVec3 {
     let lane_terms = (entries / WIDE + 2) as f64;
     reported_bound(error) * (1.0 + lane_terms * f64::EPSILON)
 }
-

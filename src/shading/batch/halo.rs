@@ -97,7 +97,11 @@ pub(super) fn halos<M>(
 /// halo's edge, so the blend changes continuously from one group to the
 /// next: the seams that two groups' different cuts leave at their border
 /// are spread over the halo.
-pub(super) fn blend_halos(results: &mut [ShadeResult], mut halo: Vec<HaloResult>, threshold: &Threshold) {
+pub(super) fn blend_halos(
+    results: &mut [ShadeResult],
+    mut halo: Vec<HaloResult>,
+    threshold: &Threshold,
+) {
     halo.sort_unstable_by_key(|h| (h.point, h.run));
     for same in halo.chunk_by(|a, b| a.point == b.point) {
         let own = &mut results[same[0].point as usize];
@@ -128,4 +132,3 @@ pub(super) fn blend_halos(results: &mut [ShadeResult], mut halo: Vec<HaloResult>
         }
     }
 }
-

@@ -124,7 +124,10 @@ impl<'q, M> Batch<'q, M> {
     /// The groups of chunk `k`, with the index of the first.
     fn chunk(&self, k: usize) -> (usize, &[core::ops::Range<usize>]) {
         let first = k * CHUNK_RUNS;
-        (first, &self.runs[first..(first + CHUNK_RUNS).min(self.runs.len())])
+        (
+            first,
+            &self.runs[first..(first + CHUNK_RUNS).min(self.runs.len())],
+        )
     }
 
     /// The number of chunks.

@@ -85,8 +85,14 @@ impl<S: Shader> Shading<'_, S> {
                     break Ok(());
                 };
                 let mut write = |i: usize, r| written.push((i as u32, r));
-                let chunk =
-                    shading.shade_chunk(&batch, k, threshold, &mut visibility, &mut write, &mut out);
+                let chunk = shading.shade_chunk(
+                    &batch,
+                    k,
+                    threshold,
+                    &mut visibility,
+                    &mut write,
+                    &mut out,
+                );
                 if let Err(e) = chunk {
                     break Err(e);
                 }
