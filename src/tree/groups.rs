@@ -29,8 +29,8 @@
 //! numbers rounded upward (see [`half_up`]), so that they still bound the
 //! node's multipoles.
 
-use super::build::Notes;
-use super::layout::{LightTree, Node};
+use super::node::Node;
+use super::notes::{Notes, RatioRange, Ratios};
 use super::pool::Pool;
 use crate::PointLight;
 
@@ -223,25 +223,20 @@ pub(crate) fn colour_spreads(nodes: &[Node], lights: &[PointLight]) -> Vec<[f32;
     spreads_from_leaves(nodes, &mut notes)
 }
 
-/// Per channel 1 and 2, the smallest and largest ratio to channel 0 of a
-/// node's lights, each computed within one rounding (2^-53 relative) of
-/// its value (see [`colour_spreads`]).
-pub(super) type Ratios = [(f64, f64); 2];
-
 /// Widens `range` to hold `[low, high]`: one minimum and one maximum
 /// instruction, a NaN end failing its comparison and passed over.
 #[allow(clippy::manual_clamp)]
 #[inline(always)]
-fn widen(range: &mut (f64, f64), (low, high): (f64, f64)) {
-    range.0 = if low < range.0 { low } else { range.0 };
-    range.1 = if high > range.1 { high } else { range.1 };
+fn widen(range: &mut RatioRange, RatioRange { low, high }: RatioRange) {
+    range.low = if low < range.low { low } else { range.low };
+    range.high = if high > range.high { high } else { range.high };
 }
 
 /// The [`Ratios`] of a leaf's `lights`, read only until its spread passes
 /// [`MONO_SPREAD_MAX`].
 #[inline(always)]
 pub(super) fn leaf_ratios(lights: &[PointLight]) -> Ratios {
-    let mut range = [(f64::INFINITY, 0.0f64); 2];
+    let mut range = [RatioRange::EMPTY; 2];
     // Without branches: a member with nothing in channel 0 has a ratio of
     // infinity where it has something in channel k, and NaN (0 / 0) where
     // it has nothing there either, adding 0 to both channels' sums.
@@ -249,13 +244,13 @@ pub(super) fn leaf_ratios(lights: &[PointLight]) -> Ratios {
         let i = light.intensity.as_dvec3();
         for (k, range) in range.iter_mut().enumerate() {
             let r = i[k + 1] / i.x;
-            widen(range, (r, r));
+            widen(range, RatioRange { low: r, high: r });
         }
         // A leaf of many colours is settled (and so are its ancestors):
         // the rest of its lights are not read.
         if range
             .iter()
-            .any(|&(low, high)| high > low * MONO_SPREAD_MAX)
+            .any(|&RatioRange { low, high }| high > low * MONO_SPREAD_MAX)
         {
             break;
         }
@@ -272,7 +267,7 @@ fn spreads_from_leaves(nodes: &[Node], notes: &mut [Notes]) -> Vec<[f32; 2]> {
         if node.is_leaf() {
             continue;
         }
-        let mut range = [(f64::INFINITY, 0.0f64); 2];
+        let mut range = [RatioRange::EMPTY; 2];
         for child in node.children() {
             for (range, &child_range) in range.iter_mut().zip(&notes[child].ratios) {
                 widen(range, child_range);
@@ -283,7 +278,7 @@ fn spreads_from_leaves(nodes: &[Node], notes: &mut [Notes]) -> Vec<[f32; 2]> {
     notes
         .iter()
         .map(|notes| {
-            notes.ratios.map(|(low, high)| {
+            notes.ratios.map(|RatioRange { low, high }| {
                 if high == 0.0 || (low == 1.0 && high == 1.0) {
                     1.0
                 } else if low > 0.0 && high < f64::INFINITY {
@@ -523,14 +518,14 @@ fn relative_extent(min: f32, max: f32, c: f32) -> (f32, f32) {
     (low, high)
 }
 
-impl LightTree {
-    /// Recomputes the node groups from the nodes (after a build or refit),
-    /// on `pool`, the leaves' colour ratios taken from the statistics
-    /// pass's `notes` (one per node) rather than read again from the
-    /// lights: the blocks [`NodeGroups::new_on`] makes.
-    pub(super) fn fill_groups(&mut self, notes: &mut [Notes], pool: Pool) {
-        let spreads = spreads_from_leaves(&self.nodes, notes);
-        self.groups.refill_spread(&self.nodes, &spreads, pool);
+impl NodeGroups {
+    /// Makes these the blocks of `nodes` (after a build or refit), on
+    /// `pool`, the leaves' colour ratios taken from the statistics pass's
+    /// `notes` (one per node) rather than read again from the lights: the
+    /// blocks [`NodeGroups::new_on`] makes.
+    pub(super) fn refill_from_notes(&mut self, nodes: &[Node], notes: &mut [Notes], pool: Pool) {
+        let spreads = spreads_from_leaves(nodes, notes);
+        self.refill_spread(nodes, &spreads, pool);
     }
 }
 
@@ -539,7 +534,7 @@ mod tests {
     use glam::Vec3;
 
     use super::*;
-    use crate::PointLight;
+    use crate::{LightTree, PointLight};
 
     /// Every lane of every group holds its child's values, the box stored
     /// relative to the centroid contains every member, and the norms are

@@ -2,8 +2,9 @@
 
 use glam::DVec3;
 
-use super::build::{HARMONIC_COUNT, harmonic_norms, solid_harmonics};
-use super::layout::{LightTree, MAX_CHILDREN};
+use super::harmonics::{HARMONIC_COUNT, harmonic_norms, solid_harmonics};
+use super::layout::LightTree;
+use super::node::MAX_CHILDREN;
 use crate::ValidationError;
 use crate::numeric::SUM_TOLERANCE;
 
