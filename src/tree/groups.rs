@@ -544,7 +544,6 @@ mod tests {
     #[test]
     fn groups_hold_their_childrens_values() {
         let mut state = 5u64;
-        let mut u = || crate::testing::uniform(&mut state);
         // A flat scene (nodes of four children) and a solid one (eight);
         // coloured lights, white ones, and white ones with a coloured
         // corner.
@@ -556,20 +555,7 @@ mod tests {
             (30.0, 2),
             (30.0, 3),
         ] {
-            let lights: Vec<PointLight> = (0..3000)
-                .map(|_| {
-                    let p = Vec3::new(u() * 900.0 + 1e4, u() * 30.0 - 15.0, u() * depth);
-                    let white = colours == 1 || (colours == 2 && p.x > 1e4 + 100.0);
-                    let colour = if white {
-                        Vec3::splat(u() * 3.0)
-                    } else if colours == 3 {
-                        Vec3::new(1.0, 0.55, 0.2) * (u() * 3.0)
-                    } else {
-                        Vec3::new(u(), u(), u() * 0.1)
-                    };
-                    PointLight::new(p, colour)
-                })
-                .collect();
+            let lights = scene(&mut state, depth, colours);
             let tree = LightTree::build(&lights).unwrap();
             let spreads = colour_spreads(tree.nodes(), tree.lights());
             let (coloured, mono) = tree.groups.kinds();
@@ -597,53 +583,8 @@ mod tests {
                     one_colour
                 );
                 for (i, child) in tree.nodes()[parent.children()].iter().enumerate() {
-                    // A lane's rows, its norms, and the row of channel 0's
-                    // first second moment.
-                    let (lane, norm, covariances): (Vec<f32>, Vec<u16>, usize) = with_block!(group, b => (
-                        b.rows.iter().map(|r| r[i]).collect(),
-                        b.norms.iter().map(|r| r[i]).collect(),
-                        covariance_row_of(b, 0, 0),
-                    ));
-                    let mono = lane.len() == MONO_ROWS;
                     let spread = spreads[parent.children().start + i];
-                    if mono {
-                        assert_eq!(lane[MONO_ROWS - 2..], spread);
-                        // At least the largest over the smallest ratio
-                        // of channel k + 1 to channel 0 of its lights.
-                        for (k, &spread) in spread.iter().enumerate() {
-                            let (low, high) = tree.lights()[child.lights()]
-                                .iter()
-                                .map(|l| f64::from(l.intensity[k + 1]) / f64::from(l.intensity.x))
-                                .fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r), b.max(r)));
-                            if high > 0.0 {
-                                assert!(f64::from(spread) >= high / low, "{spread} {high} {low}");
-                            }
-                        }
-                        let white = colours == 1 || child.intensity.x == child.intensity.y;
-                        assert_eq!(spread == [1.0; 2], white, "{spread:?}");
-                        assert!(spread.iter().all(|&s| s <= 1.0 + 1e-6), "{spread:?}");
-                    }
-                    // Channel 1 (channel 0 of a one-colour block), and
-                    // channel 2's norms (channel 0's).
-                    let (k, n) = if mono { (0, 0) } else { (1, 2) };
-                    assert_eq!(lane[RADIUS], child.radius);
-                    assert_eq!(lane[CENTROID + 2], child.centroid.z);
-                    assert_eq!(
-                        lane[covariances + 6 * k + 4],
-                        child.channel_covariances[k][4]
-                    );
-                    assert_eq!(lane[OFFSETS + 3 * k + 2], child.channel_offsets[k].z);
-                    let q = child.harmonic_norms[1][n];
-                    let stored = widen_half(norm[3 * n + 1]);
-                    assert!(stored >= q && stored <= q.max(6.2e-5) * (1.0 + 1.0 / 1024.0));
-                    for light in &tree.lights()[child.lights()] {
-                        for axis in 0..3 {
-                            let rel =
-                                f64::from(light.position[axis]) - f64::from(child.centroid[axis]);
-                            assert!(f64::from(lane[BOX_LOW + axis]) <= rel);
-                            assert!(f64::from(lane[BOX_HIGH + axis]) >= rel);
-                        }
-                    }
+                    check_lane(&tree, group, i, child, spread, colours);
                     checked
                         [usize::from(matches!(group, Group::Eight(..) | Group::MonoEight(..)))] +=
                         1;
@@ -654,6 +595,84 @@ mod tests {
                 tree.groups.first_mismatch(tree.nodes(), tree.lights()),
                 None
             );
+        }
+    }
+
+    /// 3,000 lights in a box `depth` thick: coloured (`colours` 0), white
+    /// (1), white but for a coloured corner (2), or of one colour scaled
+    /// (3).
+    fn scene(state: &mut u64, depth: f32, colours: u32) -> Vec<PointLight> {
+        let mut u = || crate::testing::uniform(state);
+        (0..3000)
+            .map(|_| {
+                let p = Vec3::new(u() * 900.0 + 1e4, u() * 30.0 - 15.0, u() * depth);
+                let white = colours == 1 || (colours == 2 && p.x > 1e4 + 100.0);
+                let colour = if white {
+                    Vec3::splat(u() * 3.0)
+                } else if colours == 3 {
+                    Vec3::new(1.0, 0.55, 0.2) * (u() * 3.0)
+                } else {
+                    Vec3::new(u(), u(), u() * 0.1)
+                };
+                PointLight::new(p, colour)
+            })
+            .collect()
+    }
+
+    /// Lane `i` of `group` holds the values of `child`, whose colour
+    /// spreads are `spread`, in a tree of [`scene`]`(_, _, colours)`.
+    fn check_lane(
+        tree: &LightTree,
+        group: Group<'_>,
+        i: usize,
+        child: &Node,
+        spread: [f32; 2],
+        colours: u32,
+    ) {
+        // A lane's rows, its norms, and the row of channel 0's first
+        // second moment.
+        let (lane, norm, covariances): (Vec<f32>, Vec<u16>, usize) = with_block!(group, b => (
+            b.rows.iter().map(|r| r[i]).collect(),
+            b.norms.iter().map(|r| r[i]).collect(),
+            covariance_row_of(b, 0, 0),
+        ));
+        let mono = lane.len() == MONO_ROWS;
+        if mono {
+            assert_eq!(lane[MONO_ROWS - 2..], spread);
+            // At least the largest over the smallest ratio of channel
+            // k + 1 to channel 0 of its lights.
+            for (k, &spread) in spread.iter().enumerate() {
+                let (low, high) = tree.lights()[child.lights()]
+                    .iter()
+                    .map(|l| f64::from(l.intensity[k + 1]) / f64::from(l.intensity.x))
+                    .fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r), b.max(r)));
+                if high > 0.0 {
+                    assert!(f64::from(spread) >= high / low, "{spread} {high} {low}");
+                }
+            }
+            let white = colours == 1 || child.intensity.x == child.intensity.y;
+            assert_eq!(spread == [1.0; 2], white, "{spread:?}");
+            assert!(spread.iter().all(|&s| s <= 1.0 + 1e-6), "{spread:?}");
+        }
+        // Channel 1 (channel 0 of a one-colour block), and channel 2's
+        // norms (channel 0's).
+        let (k, n) = if mono { (0, 0) } else { (1, 2) };
+        assert_eq!(lane[RADIUS], child.radius);
+        assert_eq!(lane[CENTROID + 2], child.centroid.z);
+        assert_eq!(
+            lane[covariances + 6 * k + 4],
+            child.channel_covariances[k][4]
+        );
+        assert_eq!(lane[OFFSETS + 3 * k + 2], child.channel_offsets[k].z);
+        let q = child.harmonic_norms[1][n];
+        let stored = widen_half(norm[3 * n + 1]);
+        assert!(stored >= q && stored <= q.max(6.2e-5) * (1.0 + 1.0 / 1024.0));
+        for light in &tree.lights()[child.lights()] {
+            for axis in 0..3 {
+                let rel = f64::from(light.position[axis]) - f64::from(child.centroid[axis]);
+                assert!(f64::from(lane[BOX_LOW + axis]) <= rel);
+                assert!(f64::from(lane[BOX_HIGH + axis]) >= rel);
+            }
         }
     }
 
