@@ -28,18 +28,11 @@ impl LightTree {
         TreeBuilder::new().build(lights)
     }
 
-    /// [`build`](Self::build) spread over rayon's thread pool (with the
-    /// `rayon` feature): the same tree, bit for bit (see
-    /// [`TreeBuilder::build_parallel`]).
-    ///
-    /// # Errors
-    /// As [`build`](Self::build).
-    #[cfg(feature = "rayon")]
-    pub fn build_parallel(lights: &[PointLight]) -> Result<Self, BuildError> {
-        TreeBuilder::new().build_parallel(lights)
-    }
-
     /// A builder carrying the options (maximum lights per leaf, maximum depth).
+    ///
+    /// With the `rayon` feature, its `build_parallel` and `rebuild_parallel`
+    /// build on rayon's thread pool: `LightTree::builder().build_parallel(..)`
+    /// gives the tree [`build`](Self::build) gives, bit for bit.
     pub fn builder() -> TreeBuilder {
         TreeBuilder::new()
     }
@@ -64,22 +57,14 @@ impl LightTree {
     /// # Ok::<(), manylights::BuildError>(())
     /// ```
     ///
+    /// On rayon's thread pool (with the `rayon` feature), the builder of the
+    /// same options rebuilds it: `TreeBuilder::rebuild_parallel`.
+    ///
     /// # Errors
     /// As [`build`](Self::build); the tree is then left as it was.
     pub fn rebuild(&mut self, lights: &[PointLight]) -> Result<(), BuildError> {
         let options = self.options;
         options.rebuild(self, lights)
-    }
-
-    /// [`rebuild`](Self::rebuild) spread over rayon's thread pool (with the
-    /// `rayon` feature), as [`TreeBuilder::build_parallel`].
-    ///
-    /// # Errors
-    /// As [`build`](Self::build); the tree is then left as it was.
-    #[cfg(feature = "rayon")]
-    pub fn rebuild_parallel(&mut self, lights: &[PointLight]) -> Result<(), BuildError> {
-        let options = self.options;
-        options.rebuild_parallel(self, lights)
     }
 }
 
@@ -482,7 +467,7 @@ mod parallel {
     fn a_parallel_build_and_refit_give_the_tree_of_one_thread() {
         let lights = lights(5, 60_000);
         let one = LightTree::build(&lights).unwrap();
-        let pool = on_two_threads(|| LightTree::build_parallel(&lights).unwrap());
+        let pool = on_two_threads(|| LightTree::builder().build_parallel(&lights).unwrap());
         assert!(!one.planes.is_empty(), "the roof is recorded as a plane");
         assert_same(&one, &pool);
 
@@ -501,9 +486,13 @@ mod parallel {
         assert_same(&one, &pool);
 
         // Rebuilt in place on the pool, over fewer lights and then more.
-        on_two_threads(|| pool.rebuild_parallel(&lights[..20_000]).unwrap());
+        on_two_threads(|| {
+            builder
+                .rebuild_parallel(&mut pool, &lights[..20_000])
+                .unwrap()
+        });
         assert_same(&builder.build(&lights[..20_000]).unwrap(), &pool);
-        on_two_threads(|| pool.rebuild_parallel(&moved).unwrap());
+        on_two_threads(|| builder.rebuild_parallel(&mut pool, &moved).unwrap());
         assert_same(&builder.build(&moved).unwrap(), &pool);
     }
 
@@ -513,7 +502,7 @@ mod parallel {
         lights[41_234].intensity.y = f32::NAN;
         lights[45_000].position.x = f32::INFINITY;
         let one = LightTree::build(&lights).unwrap_err();
-        let pool = on_two_threads(|| LightTree::build_parallel(&lights).unwrap_err());
+        let pool = on_two_threads(|| LightTree::builder().build_parallel(&lights).unwrap_err());
         assert_eq!(one, BuildError::NonFiniteIntensity { index: 41_234 });
         assert_eq!(one, pool);
 
