@@ -1,8 +1,8 @@
 //! Criterion bench of the tree build: `LightTree::build` over city street
 //! lamps (the report's layout, fixed density), 10^3 to 10^6 lights,
 //! `LightTree::rebuild` (the same tree, in the memory of one built before)
-//! and `LightTree::build_parallel` (the same tree on rayon's pool) from
-//! 10^5.
+//! and `LightTree::builder().build_parallel` (the same tree on rayon's
+//! pool) from 10^5.
 //!
 //! ```text
 //! cargo bench --bench build
@@ -55,7 +55,11 @@ fn build(c: &mut Criterion) {
         });
         if n >= PARALLEL_FROM {
             group.bench_with_input(BenchmarkId::new("pool", n), &lights, |b, lights| {
-                b.iter(|| LightTree::build_parallel(black_box(lights)).expect("valid lights"));
+                b.iter(|| {
+                    LightTree::builder()
+                        .build_parallel(black_box(lights))
+                        .expect("valid lights")
+                });
             });
         }
     }

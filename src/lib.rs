@@ -160,8 +160,8 @@
 //!
 //! * `rayon` (off by default): work spread over rayon's thread pool, with
 //!   the same results as on one thread: `Shading::shade_batch_parallel`,
-//!   `LightTree::build_parallel`, `TreeBuilder::build_parallel`,
-//!   `LightTree::rebuild_parallel`, `TreeBuilder::rebuild_parallel` and
+//!   `TreeBuilder::build_parallel` (`LightTree::builder().build_parallel(..)`
+//!   for the default options), `TreeBuilder::rebuild_parallel` and
 //!   `LightTree::refit_parallel`.
 //!
 //! Without it the crate depends only on `glam`, `smallvec` and `thiserror`.

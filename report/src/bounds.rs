@@ -158,7 +158,7 @@ fn print_build_table(first: &[f64]) -> Result<(), Box<dyn Error>> {
             drop(tree);
             if pooled {
                 let start = Instant::now();
-                let tree = LightTree::build_parallel(&lights)?;
+                let tree = LightTree::builder().build_parallel(&lights)?;
                 pool.push(start.elapsed().as_secs_f64());
                 drop(tree);
             }

@@ -29,8 +29,8 @@
 //! numbers rounded upward (see [`half_up`]), so that they still bound the
 //! node's multipoles.
 
-use super::build::Notes;
-use super::layout::{LightTree, Node};
+use super::node::Node;
+use super::notes::{Notes, RatioRange, Ratios};
 use super::pool::Pool;
 use crate::PointLight;
 
@@ -223,25 +223,20 @@ pub(crate) fn colour_spreads(nodes: &[Node], lights: &[PointLight]) -> Vec<[f32;
     spreads_from_leaves(nodes, &mut notes)
 }
 
-/// Per channel 1 and 2, the smallest and largest ratio to channel 0 of a
-/// node's lights, each computed within one rounding (2^-53 relative) of
-/// its value (see [`colour_spreads`]).
-pub(super) type Ratios = [(f64, f64); 2];
-
 /// Widens `range` to hold `[low, high]`: one minimum and one maximum
 /// instruction, a NaN end failing its comparison and passed over.
 #[allow(clippy::manual_clamp)]
 #[inline(always)]
-fn widen(range: &mut (f64, f64), (low, high): (f64, f64)) {
-    range.0 = if low < range.0 { low } else { range.0 };
-    range.1 = if high > range.1 { high } else { range.1 };
+fn widen(range: &mut RatioRange, RatioRange { low, high }: RatioRange) {
+    range.low = if low < range.low { low } else { range.low };
+    range.high = if high > range.high { high } else { range.high };
 }
 
 /// The [`Ratios`] of a leaf's `lights`, read only until its spread passes
 /// [`MONO_SPREAD_MAX`].
 #[inline(always)]
 pub(super) fn leaf_ratios(lights: &[PointLight]) -> Ratios {
-    let mut range = [(f64::INFINITY, 0.0f64); 2];
+    let mut range = [RatioRange::EMPTY; 2];
     // Without branches: a member with nothing in channel 0 has a ratio of
     // infinity where it has something in channel k, and NaN (0 / 0) where
     // it has nothing there either, adding 0 to both channels' sums.
@@ -249,13 +244,13 @@ pub(super) fn leaf_ratios(lights: &[PointLight]) -> Ratios {
         let i = light.intensity.as_dvec3();
         for (k, range) in range.iter_mut().enumerate() {
             let r = i[k + 1] / i.x;
-            widen(range, (r, r));
+            widen(range, RatioRange { low: r, high: r });
         }
         // A leaf of many colours is settled (and so are its ancestors):
         // the rest of its lights are not read.
         if range
             .iter()
-            .any(|&(low, high)| high > low * MONO_SPREAD_MAX)
+            .any(|&RatioRange { low, high }| high > low * MONO_SPREAD_MAX)
         {
             break;
         }
@@ -272,7 +267,7 @@ fn spreads_from_leaves(nodes: &[Node], notes: &mut [Notes]) -> Vec<[f32; 2]> {
         if node.is_leaf() {
             continue;
         }
-        let mut range = [(f64::INFINITY, 0.0f64); 2];
+        let mut range = [RatioRange::EMPTY; 2];
         for child in node.children() {
             for (range, &child_range) in range.iter_mut().zip(&notes[child].ratios) {
                 widen(range, child_range);
@@ -283,7 +278,7 @@ fn spreads_from_leaves(nodes: &[Node], notes: &mut [Notes]) -> Vec<[f32; 2]> {
     notes
         .iter()
         .map(|notes| {
-            notes.ratios.map(|(low, high)| {
+            notes.ratios.map(|RatioRange { low, high }| {
                 if high == 0.0 || (low == 1.0 && high == 1.0) {
                     1.0
                 } else if low > 0.0 && high < f64::INFINITY {
@@ -523,14 +518,14 @@ fn relative_extent(min: f32, max: f32, c: f32) -> (f32, f32) {
     (low, high)
 }
 
-impl LightTree {
-    /// Recomputes the node groups from the nodes (after a build or refit),
-    /// on `pool`, the leaves' colour ratios taken from the statistics
-    /// pass's `notes` (one per node) rather than read again from the
-    /// lights: the blocks [`NodeGroups::new_on`] makes.
-    pub(super) fn fill_groups(&mut self, notes: &mut [Notes], pool: Pool) {
-        let spreads = spreads_from_leaves(&self.nodes, notes);
-        self.groups.refill_spread(&self.nodes, &spreads, pool);
+impl NodeGroups {
+    /// Makes these the blocks of `nodes` (after a build or refit), on
+    /// `pool`, the leaves' colour ratios taken from the statistics pass's
+    /// `notes` (one per node) rather than read again from the lights: the
+    /// blocks [`NodeGroups::new_on`] makes.
+    pub(super) fn refill_from_notes(&mut self, nodes: &[Node], notes: &mut [Notes], pool: Pool) {
+        let spreads = spreads_from_leaves(nodes, notes);
+        self.refill_spread(nodes, &spreads, pool);
     }
 }
 
@@ -539,7 +534,7 @@ mod tests {
     use glam::Vec3;
 
     use super::*;
-    use crate::PointLight;
+    use crate::{LightTree, PointLight};
 
     /// Every lane of every group holds its child's values, the box stored
     /// relative to the centroid contains every member, and the norms are
@@ -549,7 +544,6 @@ mod tests {
     #[test]
     fn groups_hold_their_childrens_values() {
         let mut state = 5u64;
-        let mut u = || crate::testing::uniform(&mut state);
         // A flat scene (nodes of four children) and a solid one (eight);
         // coloured lights, white ones, and white ones with a coloured
         // corner.
@@ -561,20 +555,7 @@ mod tests {
             (30.0, 2),
             (30.0, 3),
         ] {
-            let lights: Vec<PointLight> = (0..3000)
-                .map(|_| {
-                    let p = Vec3::new(u() * 900.0 + 1e4, u() * 30.0 - 15.0, u() * depth);
-                    let white = colours == 1 || (colours == 2 && p.x > 1e4 + 100.0);
-                    let colour = if white {
-                        Vec3::splat(u() * 3.0)
-                    } else if colours == 3 {
-                        Vec3::new(1.0, 0.55, 0.2) * (u() * 3.0)
-                    } else {
-                        Vec3::new(u(), u(), u() * 0.1)
-                    };
-                    PointLight::new(p, colour)
-                })
-                .collect();
+            let lights = scene(&mut state, depth, colours);
             let tree = LightTree::build(&lights).unwrap();
             let spreads = colour_spreads(tree.nodes(), tree.lights());
             let (coloured, mono) = tree.groups.kinds();
@@ -602,53 +583,8 @@ mod tests {
                     one_colour
                 );
                 for (i, child) in tree.nodes()[parent.children()].iter().enumerate() {
-                    // A lane's rows, its norms, and the row of channel 0's
-                    // first second moment.
-                    let (lane, norm, covariances): (Vec<f32>, Vec<u16>, usize) = with_block!(group, b => (
-                        b.rows.iter().map(|r| r[i]).collect(),
-                        b.norms.iter().map(|r| r[i]).collect(),
-                        covariance_row_of(b, 0, 0),
-                    ));
-                    let mono = lane.len() == MONO_ROWS;
                     let spread = spreads[parent.children().start + i];
-                    if mono {
-                        assert_eq!(lane[MONO_ROWS - 2..], spread);
-                        // At least the largest over the smallest ratio
-                        // of channel k + 1 to channel 0 of its lights.
-                        for (k, &spread) in spread.iter().enumerate() {
-                            let (low, high) = tree.lights()[child.lights()]
-                                .iter()
-                                .map(|l| f64::from(l.intensity[k + 1]) / f64::from(l.intensity.x))
-                                .fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r), b.max(r)));
-                            if high > 0.0 {
-                                assert!(f64::from(spread) >= high / low, "{spread} {high} {low}");
-                            }
-                        }
-                        let white = colours == 1 || child.intensity.x == child.intensity.y;
-                        assert_eq!(spread == [1.0; 2], white, "{spread:?}");
-                        assert!(spread.iter().all(|&s| s <= 1.0 + 1e-6), "{spread:?}");
-                    }
-                    // Channel 1 (channel 0 of a one-colour block), and
-                    // channel 2's norms (channel 0's).
-                    let (k, n) = if mono { (0, 0) } else { (1, 2) };
-                    assert_eq!(lane[RADIUS], child.radius);
-                    assert_eq!(lane[CENTROID + 2], child.centroid.z);
-                    assert_eq!(
-                        lane[covariances + 6 * k + 4],
-                        child.channel_covariances[k][4]
-                    );
-                    assert_eq!(lane[OFFSETS + 3 * k + 2], child.channel_offsets[k].z);
-                    let q = child.harmonic_norms[1][n];
-                    let stored = widen_half(norm[3 * n + 1]);
-                    assert!(stored >= q && stored <= q.max(6.2e-5) * (1.0 + 1.0 / 1024.0));
-                    for light in &tree.lights()[child.lights()] {
-                        for axis in 0..3 {
-                            let rel =
-                                f64::from(light.position[axis]) - f64::from(child.centroid[axis]);
-                            assert!(f64::from(lane[BOX_LOW + axis]) <= rel);
-                            assert!(f64::from(lane[BOX_HIGH + axis]) >= rel);
-                        }
-                    }
+                    check_lane(&tree, group, i, child, spread, colours);
                     checked
                         [usize::from(matches!(group, Group::Eight(..) | Group::MonoEight(..)))] +=
                         1;
@@ -659,6 +595,84 @@ mod tests {
                 tree.groups.first_mismatch(tree.nodes(), tree.lights()),
                 None
             );
+        }
+    }
+
+    /// 3,000 lights in a box `depth` thick: coloured (`colours` 0), white
+    /// (1), white but for a coloured corner (2), or of one colour scaled
+    /// (3).
+    fn scene(state: &mut u64, depth: f32, colours: u32) -> Vec<PointLight> {
+        let mut u = || crate::testing::uniform(state);
+        (0..3000)
+            .map(|_| {
+                let p = Vec3::new(u() * 900.0 + 1e4, u() * 30.0 - 15.0, u() * depth);
+                let white = colours == 1 || (colours == 2 && p.x > 1e4 + 100.0);
+                let colour = if white {
+                    Vec3::splat(u() * 3.0)
+                } else if colours == 3 {
+                    Vec3::new(1.0, 0.55, 0.2) * (u() * 3.0)
+                } else {
+                    Vec3::new(u(), u(), u() * 0.1)
+                };
+                PointLight::new(p, colour)
+            })
+            .collect()
+    }
+
+    /// Lane `i` of `group` holds the values of `child`, whose colour
+    /// spreads are `spread`, in a tree of [`scene`]`(_, _, colours)`.
+    fn check_lane(
+        tree: &LightTree,
+        group: Group<'_>,
+        i: usize,
+        child: &Node,
+        spread: [f32; 2],
+        colours: u32,
+    ) {
+        // A lane's rows, its norms, and the row of channel 0's first
+        // second moment.
+        let (lane, norm, covariances): (Vec<f32>, Vec<u16>, usize) = with_block!(group, b => (
+            b.rows.iter().map(|r| r[i]).collect(),
+            b.norms.iter().map(|r| r[i]).collect(),
+            covariance_row_of(b, 0, 0),
+        ));
+        let mono = lane.len() == MONO_ROWS;
+        if mono {
+            assert_eq!(lane[MONO_ROWS - 2..], spread);
+            // At least the largest over the smallest ratio of channel
+            // k + 1 to channel 0 of its lights.
+            for (k, &spread) in spread.iter().enumerate() {
+                let (low, high) = tree.lights()[child.lights()]
+                    .iter()
+                    .map(|l| f64::from(l.intensity[k + 1]) / f64::from(l.intensity.x))
+                    .fold((f64::INFINITY, 0.0f64), |(a, b), r| (a.min(r), b.max(r)));
+                if high > 0.0 {
+                    assert!(f64::from(spread) >= high / low, "{spread} {high} {low}");
+                }
+            }
+            let white = colours == 1 || child.intensity.x == child.intensity.y;
+            assert_eq!(spread == [1.0; 2], white, "{spread:?}");
+            assert!(spread.iter().all(|&s| s <= 1.0 + 1e-6), "{spread:?}");
+        }
+        // Channel 1 (channel 0 of a one-colour block), and channel 2's
+        // norms (channel 0's).
+        let (k, n) = if mono { (0, 0) } else { (1, 2) };
+        assert_eq!(lane[RADIUS], child.radius);
+        assert_eq!(lane[CENTROID + 2], child.centroid.z);
+        assert_eq!(
+            lane[covariances + 6 * k + 4],
+            child.channel_covariances[k][4]
+        );
+        assert_eq!(lane[OFFSETS + 3 * k + 2], child.channel_offsets[k].z);
+        let q = child.harmonic_norms[1][n];
+        let stored = widen_half(norm[3 * n + 1]);
+        assert!(stored >= q && stored <= q.max(6.2e-5) * (1.0 + 1.0 / 1024.0));
+        for light in &tree.lights()[child.lights()] {
+            for axis in 0..3 {
+                let rel = f64::from(light.position[axis]) - f64::from(child.centroid[axis]);
+                assert!(f64::from(lane[BOX_LOW + axis]) <= rel);
+                assert!(f64::from(lane[BOX_HIGH + axis]) >= rel);
+            }
         }
     }
 

@@ -14,8 +14,9 @@
 
 use glam::{DVec3, Vec3};
 
-use super::build::Notes;
-use super::layout::{LightTree, NO_PLANE, Node};
+use super::layout::{LightTree, NO_PLANE};
+use super::node::Node;
+use super::notes::Notes;
 use super::pool::Pool;
 use crate::numeric::dot_of_difference;
 

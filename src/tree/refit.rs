@@ -1,8 +1,9 @@
 //! Refitting: new positions and intensities, the same grouping.
 
-use super::build::{check_lights, fill_statistics};
+use super::check::check_lights;
 use super::layout::LightTree;
 use super::pool::Pool;
+use super::statistics_pass::fill_nodes;
 use crate::{BuildError, PointLight};
 
 impl LightTree {
@@ -47,9 +48,7 @@ impl LightTree {
         let order = &self.order;
         pool.cheap(order.len())
             .fill(&mut self.lights, |i| lights[order[i] as usize]);
-        let mut notes = fill_statistics(self, pool);
-        super::plane::record_planes(self, &notes, pool.cheap(lights.len()));
-        self.fill_groups(&mut notes, pool);
+        fill_nodes(self, pool);
         Ok(())
     }
 }
