@@ -168,6 +168,7 @@
 
 #![deny(unsafe_code)]
 
+mod combined;
 mod cut;
 mod dispatch;
 mod error;
@@ -175,25 +176,34 @@ mod geometry;
 mod lambert;
 mod lanes;
 mod light;
-pub mod numeric;
+mod numeric;
 mod phong;
-mod shader;
+pub mod shader;
 mod shading;
 #[cfg(test)]
 mod testing;
 mod tree;
 mod visibility;
 
+pub use combined::Combined;
 pub use cut::{ShadeResult, Stop, Target, Threshold};
 pub use error::{BuildError, ShadeError, ValidationError};
-pub use geometry::{Aabb, Cone, Surface};
+pub use geometry::Aabb;
 pub use lambert::{BoundKind, Lambert};
-pub use light::{LightLanes, PointLight};
-pub use phong::{Mirror, Phong};
-pub use shader::{Combined, NodeEstimate, Shader, ViewIndependent};
-pub use shading::{Accepts, BatchStats, NoView, Query, Shading, WithView};
-pub use tree::{LightTree, Node, TreeBuilder};
+pub(crate) use light::LightLanes;
+pub use light::PointLight;
+pub use phong::Phong;
+pub use shading::{BatchStats, Query, Shading};
+pub use tree::{LightTree, TreeBuilder};
 pub use visibility::{Coverage, NodeRegion, PointGroup, Unoccluded, Visibility};
+
+/// The type states of a [`Query`]: whether it carries a view direction
+/// ([`WithView`]) or not ([`NoView`]), and which a shader accepts
+/// ([`Accepts`]). A view-dependent shader given a query without a view does
+/// not compile; a renderer names these only in generic code over queries.
+pub mod query {
+    pub use crate::shading::{Accepts, NoView, WithView};
+}
 
 // The README's code blocks are compiled and run as doc tests.
 #[cfg(doctest)]

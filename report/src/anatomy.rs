@@ -22,10 +22,8 @@ use std::collections::{BTreeMap, HashSet};
 use std::error::Error;
 
 use glam::{DVec3, Vec3};
-use manylights::{
-    BoundKind, Cone, Lambert, LightTree, Node, NodeEstimate, PointLight, Shader, Surface,
-    Threshold, Unoccluded,
-};
+use manylights::shader::{Cone, Node, NodeEstimate, Shader, Surface};
+use manylights::{BoundKind, Lambert, LightTree, PointLight, Threshold, Unoccluded};
 
 use crate::config::{SCALING_RELATIVE, SEED};
 use crate::scenes;

@@ -14,7 +14,8 @@ use std::error::Error;
 use std::time::Instant;
 
 use glam::Vec3;
-use manylights::{BoundKind, Lambert, LightTree, Node, PointLight, Threshold};
+use manylights::shader::Node;
+use manylights::{BoundKind, Lambert, LightTree, PointLight, Threshold};
 use rand::RngExt;
 
 use crate::config::{SEED, build_repeats};

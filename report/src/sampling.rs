@@ -26,7 +26,8 @@
 //! neither sampler knows about occluders when it chooses, as in pbrt-v4.
 
 use glam::{DVec3, Vec3};
-use manylights::{LightTree, Node, PointLight, Shader, Surface};
+use manylights::shader::{Node, Shader, Surface};
+use manylights::{LightTree, PointLight};
 use rand::RngExt;
 
 use crate::scenes::SceneRng;

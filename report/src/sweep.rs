@@ -7,9 +7,10 @@ use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
+use manylights::query::WithView;
+use manylights::shader::Shader;
 use manylights::{
-    BoundKind, Combined, Lambert, LightTree, Phong, Query, Shader, Threshold, Unoccluded,
-    Visibility, WithView,
+    BoundKind, Combined, Lambert, LightTree, Phong, Query, Threshold, Unoccluded, Visibility,
 };
 use rayon::prelude::*;
 

@@ -288,8 +288,15 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
                 Some(n) => n.totals(),
                 None => R::sums(self, list),
             };
-            let before = threshold.excess(sums.0, super::reported_bound(sums.1), largest);
-            if list.may_stop() && before <= 0.0 {
+            let may_stop = list.may_stop();
+            // The excess over the target: whether the list may stop, and
+            // where an interpolation level lies.
+            let before = if may_stop || interpolating {
+                threshold.excess(sums.0, super::reported_bound(sums.1), largest)
+            } else {
+                f64::INFINITY
+            };
+            if may_stop && before <= 0.0 {
                 // Confirm with exact sums: the running ones drift.
                 let sums = match nesting.as_deref_mut() {
                     Some(n) => n.fold(list),

@@ -15,11 +15,8 @@
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
 
-use crate::shader::Seal;
-use crate::{
-    BoundKind, Combined, Cone, Lambert, LightTree, NodeEstimate, Phong, PointLight, ShadeResult,
-    Shader, Surface,
-};
+use crate::shader::{Cone, NodeEstimate, Seal, Shader, Surface};
+use crate::{BoundKind, Combined, Lambert, LightTree, Phong, PointLight, ShadeResult};
 
 /// `default` cases per property, or `PROPTEST_CASES` where it is set.
 fn cases(default: u32) -> ProptestConfig {

@@ -656,8 +656,8 @@ mod tests {
     use super::{COARSE_MAX, U, sum_baseline};
     use crate::dispatch::baseline;
     use crate::geometry::Surface;
-    use crate::shader::Seal;
-    use crate::{Lambert, PointLight, Shader};
+    use crate::shader::{Seal, Shader};
+    use crate::{Lambert, PointLight};
 
     /// Both copies, which must agree bit for bit.
     fn coarse(

@@ -1320,10 +1320,8 @@ mod tests {
 
     use super::{BoundKind, Lambert};
     use crate::dispatch::baseline;
-    use crate::shader::Seal;
-    use crate::{
-        Combined, Cone, LightTree, Node, NodeEstimate, Phong, PointLight, Shader, Surface,
-    };
+    use crate::shader::{Cone, Node, NodeEstimate, Seal, Shader, Surface};
+    use crate::{Combined, LightTree, Phong, PointLight};
 
     fn bits(e: &NodeEstimate) -> [u64; 9] {
         let mut out = [0; 9];

@@ -1,14 +1,19 @@
-//! The `Shader` trait: exact evaluation of one light, a certified bound for a
-//! node.
+//! Writing a shader: the [`Shader`] trait (exact evaluation of one light, a
+//! certified bound for a node), the [`NodeEstimate`] it returns, and the
+//! geometry and node data a bound reads ([`Surface`], [`Cone`], [`Node`]
+//! and its [`Aabb`](crate::Aabb)).
+//!
+//! A renderer that uses the crate's shaders ([`Lambert`](crate::Lambert),
+//! [`Phong`](crate::Phong), [`Combined`](crate::Combined)) needs nothing
+//! from this module.
 
 use glam::{DVec3, Vec3};
 
-mod combined;
-
-pub use combined::Combined;
-
-use crate::geometry::{Cone, GroupView, Surface};
-use crate::tree::{LightTree, Node};
+use crate::geometry::GroupView;
+pub use crate::geometry::{Cone, Surface};
+pub use crate::phong::Mirror;
+use crate::tree::LightTree;
+pub use crate::tree::Node;
 use crate::{LightLanes, PointLight, ShadeError};
 
 /// The token of the [`Shader`] trait's crate-internal methods (the fast
@@ -83,27 +88,34 @@ impl NodeEstimate {
 /// A reflectance model with a bound for groups of lights.
 ///
 /// An implementation gives the exact contribution of one point light and a
-/// certified [`NodeEstimate`] for a whole node of the [`LightTree`]
-/// from the node's stored data alone. The crate's cut (see
-/// [`Shading`](crate::Shading)) refines nodes until the bounds meet the
-/// requested threshold, and is only as certified as the bounds: a custom
-/// shader must guarantee [`NodeEstimate`]'s contract for every node whose
-/// [`Cone`] exists (nodes whose ball reaches the shading point have no cone
-/// and are always refined).
+/// certified [`NodeEstimate`] for a whole node of the
+/// [`LightTree`](crate::LightTree) from the node's stored data alone. The
+/// crate's cut (see [`Shading`](crate::Shading)) refines nodes until the
+/// bounds meet the requested threshold, and is only as certified as the
+/// bounds: a custom shader must guarantee [`NodeEstimate`]'s contract for
+/// every node whose [`Cone`] exists (nodes whose ball reaches the shading
+/// point have no cone and are always refined).
 ///
 /// Everything is computed in `f64`. Per shading point the shader derives
 /// what it needs once ([`prepare`](Self::prepare), e.g. Phong's mirror
-/// direction) and gets it back in every call. Implementations that need no view
-/// direction also implement the marker [`ViewIndependent`], which unlocks the
-/// view-less shading calls.
+/// direction) and gets it back in every call. Implementations that need no
+/// view direction also implement the marker [`ViewIndependent`], which
+/// unlocks the view-less shading calls.
 ///
 /// # Writing one
-/// `eval` must be the model (the exact reference,
-/// [`Shading::exact_query`](crate::Shading::exact_query), sums it); `bound` may
-/// use the node's intensity, ball ([`Cone`]), weight, first and second
-/// moments ([`Node`]'s accessors document each). The simplest valid bound is
-/// the interval of the model over the ball: smallest and largest value of the
-/// BRDF times `1/(D + R)^2` and `1/(D - R)^2`, times the node's intensity.
+/// Three methods are required. `eval` must be the model (the exact
+/// reference, [`Shading::exact_query`](crate::Shading::exact_query), sums
+/// it); `bound` may use the node's intensity, ball ([`Cone`]), box, weight,
+/// first and second moments ([`Node`]'s accessors document each). The
+/// simplest valid bound is the interval of the model over the ball:
+/// smallest and largest value of the BRDF times `1/(D + R)^2` and `1/(D -
+/// R)^2`, times the node's intensity. Three more are optional:
+/// [`eval_lights`](Self::eval_lights) and [`bound_nodes`](Self::bound_nodes)
+/// to evaluate several lights or bound several nodes side by side, and
+/// [`horizon`](Self::horizon) to let the cut settle coplanar nodes below
+/// the surface without bounding them. The crate's own shaders have further
+/// fast paths (sums and bounds in `f32` lanes, bounds for groups of points)
+/// that are not part of the trait a custom shader implements.
 pub trait Shader {
     /// Per-shading-point data the shader derives once per call (for Phong,
     /// the mirror direction), passed back to `eval` and `bound`.
@@ -156,9 +168,50 @@ pub trait Shader {
         }
     }
 
+    /// Bounds several nodes seen from one point: `out[i]` receives exactly
+    /// what [`bound`](Self::bound) gives for `nodes[i]` under `cones[i]`
+    /// (the three slices have the same length; past the shortest, entries
+    /// are ignored and `out` is left as it was). The cut calls it with the
+    /// children of a node that enter it together, so that a shader can
+    /// bound them side by side in vector registers, as [`Lambert`]'s series
+    /// bound does; the default bounds them one by one.
+    ///
+    /// [`Lambert`]: crate::Lambert
+    #[inline]
+    fn bound_nodes(
+        &self,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        nodes: &[&Node],
+        cones: &[Cone],
+        out: &mut [NodeEstimate],
+    ) {
+        for ((node, cone), out) in nodes.iter().zip(cones).zip(out) {
+            *out = self.bound(point, surface, node, cone);
+        }
+    }
+
+    /// A vector `a` such that [`eval`](Self::eval) is exactly 0 for every
+    /// light at or below the plane through the shading point perpendicular
+    /// to `a` (`a . (x - p) <= 0` exactly, for `a` as returned). The cut
+    /// then settles as 0, without bounding it, a node whose lights all lie
+    /// exactly in one plane parallel to that one and not above it (lights
+    /// on a tilted roof, seen from a point of the roof).
+    /// [`Lambert`](crate::Lambert) returns the given normal; the default,
+    /// `None`, claims nothing.
+    fn horizon(&self, surface: &Surface) -> Option<Vec3> {
+        let _ = surface;
+        None
+    }
+
+    // The crate's own fast paths: hidden, sealed by `Seal` (a custom shader
+    // can neither call nor override them), each with a default that needs
+    // nothing of the shader. When the cut calls them is its policy
+    // (`cut::policy`); their docs give their contracts.
+
     /// The sum of what [`eval`](Self::eval) gives for each of `lights`: what
-    /// the cut adds for lights known visible. The cut passes at most 16
-    /// lights a call.
+    /// the cut adds for lights known visible, at most [`SUM_LIGHTS_MAX`] a
+    /// call.
     ///
     /// Contract: every term is non-negative (as `eval`'s must be), and the
     /// result may differ from the exact sum of the exact terms by each
@@ -198,16 +251,11 @@ pub trait Shader {
     /// exact terms; or `None` where the shader has no such sum, or the
     /// lights (or the point) fall outside the range it handles.
     ///
-    /// The cut calls it, at most 64 lights a call, in place of
-    /// [`sum_lights`](Self::sum_lights) when the threshold is a relative
-    /// target of at least `2^-12` (about `2.4e-4`; without interpolation
-    /// across levels), and keeps a result only where its
-    /// `error` is at most `1/32` of the target times `sum`, channel by
-    /// channel; the errors join the reported bound, so they take at most
-    /// a thirty-second of the target. The default returns `None`.
-    /// [`Lambert`] sums in `f32`, eight lights side by side; a sum of
-    /// shaders ([`Combined`]) where either term does, the other term adding
-    /// its [`sum_lights`](Self::sum_lights).
+    /// At most [`COARSE_LIGHTS_MAX`] lights a call. The cut adds `error`
+    /// to the bound it reports. The default returns `None`. [`Lambert`]
+    /// sums in `f32`, eight lights side by side; a sum of shaders
+    /// ([`Combined`](crate::Combined)) where either term does, the other
+    /// term adding its [`sum_lights`](Self::sum_lights).
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
@@ -227,15 +275,10 @@ pub trait Shader {
     /// lights that `lanes` hold side by side (light `8 j + k` in lane `k`
     /// of `lanes[j]`; at most 64 lights, `count` of them, the spare lanes
     /// of the last group repeating the last light): `Some` of a sum and a
-    /// certified bound on its error as there, or `None`. The cut calls it
-    /// where it sums a whole small scene, whose lights it keeps side by
-    /// side for this, and the scene's
-    /// [`sum_scene_coarse`](Self::sum_scene_coarse) is not kept, 64
-    /// lights at a time, and calls `sum_lights_coarse` on the same lights
-    /// where it returns `None`; the default returns `None`. [`Lambert`]
-    /// gives the same bits as its `sum_lights_coarse`, loading each
-    /// quantity of eight lights with one instruction instead of gathering
-    /// them.
+    /// certified bound on its error as there, or `None` (the default).
+    /// [`Lambert`] gives the same bits as its `sum_lights_coarse`, loading
+    /// each quantity of eight lights with one instruction instead of
+    /// gathering them.
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
@@ -254,16 +297,12 @@ pub trait Shader {
 
     /// [`sum_lanes_coarse`](Self::sum_lanes_coarse) of a whole small
     /// scene in one call: the `count` lights that `lanes` hold side by side
-    /// (as there, but more of them; the cut passes at most 1,024), with
-    /// a certified bound on the error of the sum: `Some((sum, error))` with
-    /// `|sum - exact| <= error` per channel, or `None`. The cut calls it
-    /// first where it sums a whole small scene, and keeps the result on the
-    /// same terms as a [`sum_lights_coarse`](Self::sum_lights_coarse);
-    /// where it returns `None` or its error is too large, the cut sums the
-    /// scene 64 lights at a time as before. The default returns `None`.
-    /// [`Lambert`] sums blocks of 64 lights as its `sum_lanes_coarse`
-    /// does and adds their lanes in `f64`, so that one call sets up and
-    /// finishes the sum instead of one per block.
+    /// (as there, but more of them, at most 1,024), with a certified bound
+    /// on the error of the sum: `Some((sum, error))` with `|sum - exact| <=
+    /// error` per channel, or `None` (the default). [`Lambert`] sums blocks
+    /// of 64 lights as its `sum_lanes_coarse` does and adds their lanes in
+    /// `f64`, so that one call sets up and finishes the sum instead of one
+    /// per block.
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
@@ -293,18 +332,12 @@ pub trait Shader {
     /// of range, and for a point that is not an `f32` value; the caller
     /// then bounds each child with [`bound_nodes`](Self::bound_nodes).
     ///
-    /// The cut calls it with the children it would bound, in place of
-    /// [`bound_nodes`](Self::bound_nodes), when the threshold is a
-    /// relative target of at least `2^-12` (about `2.4e-4`; without
-    /// interpolation across levels), where its coarser rounding is
-    /// usually a negligible part of the target, and until the cut has
-    /// evaluated 512 nodes: seen at a grazing angle a node is worth a small
-    /// fraction of `I kd / D^2`, the rounding's scale, and a cut that long
-    /// bounds in `f64` from then on. [`Lambert`] with its default
+    /// [`Lambert`] with its default
     /// [`BoundKind::Series`](crate::BoundKind::Series) bounds the children
-    /// side by side in one vector of four or eight `f32` lanes; a sum of shaders
-    /// ([`Combined`]) does where either of its terms does, the other term
-    /// bounding each child as [`bound`](Self::bound) does.
+    /// side by side in one vector of four or eight `f32` lanes; a sum of
+    /// shaders ([`Combined`](crate::Combined)) does where either of its
+    /// terms does, the other term bounding each child as
+    /// [`bound`](Self::bound) does.
     ///
     /// [`Lambert`]: crate::Lambert
     #[inline]
@@ -323,35 +356,13 @@ pub trait Shader {
         false
     }
 
-    /// Bounds several nodes seen from one point: `out[i]` receives exactly
-    /// what [`bound`](Self::bound) gives for `nodes[i]` under `cones[i]`
-    /// (the three slices have the same length; past the shortest, entries
-    /// are ignored and `out` is left as it was). The cut calls it with the
-    /// children of a node that enter it together, so that a shader can
-    /// bound them side by side in vector registers, as [`Lambert`]'s series
-    /// bound does; the default bounds them one by one.
-    ///
-    /// [`Lambert`]: crate::Lambert
-    #[inline]
-    fn bound_nodes(
-        &self,
-        point: &Self::PerPoint,
-        surface: &Surface,
-        nodes: &[&Node],
-        cones: &[Cone],
-        out: &mut [NodeEstimate],
-    ) {
-        for ((node, cone), out) in nodes.iter().zip(cones).zip(out) {
-            *out = self.bound(point, surface, node, cone);
-        }
-    }
-
     /// The albedo `kd` if this shader is exactly diffuse reflection: if
     /// [`eval`](Self::eval) is [`Lambert`](crate::Lambert)'s term with this
-    /// albedo (up to rounding), whatever the view. Batch shading
-    /// ([`Shading::shade_batch`](crate::Shading::shade_batch)) then shares
-    /// cuts between neighbouring points with the crate's own diffuse
-    /// bounds; for `None` (the default) it shades each point on its own.
+    /// albedo (up to rounding), whatever the view: the batch call then
+    /// shares cuts between neighbouring points, each point summing the
+    /// diffuse estimates of the cut's nodes
+    /// ([`group_errors`](Self::group_errors) bounds them); for `None` (the
+    /// default) it shades each point on its own.
     #[doc(hidden)]
     fn diffuse_albedo(&self, _: Seal) -> Option<DVec3> {
         None
@@ -376,19 +387,6 @@ pub trait Shader {
         views: &[GroupView; N],
     ) -> Option<[DVec3; N]> {
         let _ = (nodes, views);
-        None
-    }
-
-    /// A vector `a` such that [`eval`](Self::eval) is exactly 0 for every
-    /// light at or below the plane through the shading point perpendicular
-    /// to `a` (`a . (x - p) <= 0` exactly, for `a` as returned). The cut
-    /// then settles as 0, without bounding it, a node whose lights all lie
-    /// exactly in one plane parallel to that one and not above it (lights
-    /// on a tilted roof, seen from a point of the roof).
-    /// [`Lambert`](crate::Lambert) returns the given normal; the default,
-    /// `None`, claims nothing.
-    fn horizon(&self, surface: &Surface) -> Option<Vec3> {
-        let _ = surface;
         None
     }
 }

@@ -145,9 +145,10 @@ impl<'t, S: Shader> Shading<'t, S> {
         let (tree, shader, lanes) = (self.tree, &self.shader, self.small_lanes.as_deref());
         let scratch = &mut self.scratch.point;
         let at = (query.surface(), query.point());
-        crate::dispatch::with_avx2(|| {
-            shade_point(tree, shader, lanes, at, threshold, visibility, scratch)
-        })
+        crate::dispatch::with_avx2(
+            #[inline(always)]
+            || shade_point(tree, shader, lanes, at, threshold, visibility, scratch),
+        )
     }
 
     /// The exact model (crate docs, "The model") for one query, summed over

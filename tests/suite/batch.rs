@@ -4,9 +4,10 @@
 
 use crate::common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::Vec3;
+use manylights::shader::Shader;
 use manylights::{
     Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query,
-    ShadeError, ShadeResult, Shader, Stop, Threshold, Unoccluded, Visibility,
+    ShadeError, ShadeResult, Stop, Threshold, Unoccluded, Visibility,
 };
 use proptest::prelude::*;
 
@@ -94,7 +95,7 @@ fn queries(points: &[(Vec3, Vec3)]) -> Vec<Query> {
 /// Every result of a batch against the exact sum of its own query, and the
 /// batch's count of its points: each shaded once, through a shared cut or
 /// on its own, all on their own under a budget (which cannot share).
-fn check_batch<S: Shader + manylights::ViewIndependent + Copy>(
+fn check_batch<S: Shader + manylights::shader::ViewIndependent + Copy>(
     light_set: &[PointLight],
     shader: S,
     points: &[(Vec3, Vec3)],

@@ -4,9 +4,10 @@
 
 use crate::common::*;
 use glam::Vec3;
+use manylights::shader::Shader;
 use manylights::{
-    BoundKind, Combined, Lambert, LightTree, Phong, Query, ShadeResult, Shader, Shading, Stop,
-    Threshold, Unoccluded,
+    BoundKind, Combined, Lambert, LightTree, Phong, Query, ShadeResult, Shading, Stop, Threshold,
+    Unoccluded,
 };
 use proptest::prelude::*;
 

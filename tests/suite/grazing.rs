@@ -25,9 +25,11 @@ use std::ops::{Add, Div, Mul, Neg};
 
 use crate::common::{cases, check_finite, direction, intensity, threshold, vec_in};
 use glam::{DVec3, Vec3};
+use manylights::query::WithView;
+use manylights::shader::Shader;
 use manylights::{
-    BoundKind, Combined, Lambert, LightTree, Phong, PointLight, Query, ShadeResult, Shader,
-    Threshold, Unoccluded, WithView,
+    BoundKind, Combined, Lambert, LightTree, Phong, PointLight, Query, ShadeResult, Threshold,
+    Unoccluded,
 };
 use proptest::prelude::*;
 use proptest::strategy::ValueTree;

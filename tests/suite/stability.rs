@@ -5,9 +5,10 @@
 //! over the extreme exponents, and their sum; or a clear error.
 
 use glam::{DVec3, Vec3};
+use manylights::shader::Shader;
 use manylights::{
     BoundKind, BuildError, Combined, Lambert, LightTree, Phong, PointLight, Query, ShadeError,
-    ShadeResult, Shader, Stop, Threshold, Unoccluded,
+    ShadeResult, Stop, Threshold, Unoccluded,
 };
 
 /// Thresholds every case is shaded with.

@@ -5,7 +5,8 @@
 use std::f32::consts::TAU;
 
 use glam::Vec3;
-use manylights::{Combined, Lambert, Phong, PointLight, Query, ShadeError, WithView};
+use manylights::query::WithView;
+use manylights::{Combined, Lambert, Phong, PointLight, Query, ShadeError};
 use rand::RngExt;
 
 use super::{Material, Scene, Specular, floor_points, rng};

@@ -189,9 +189,10 @@ impl<S: Shader> Shading<'_, S> {
         let Some(kd) = self.shader.diffuse_albedo(Seal) else {
             return Err(TooCostly);
         };
-        crate::dispatch::with_avx2(|| {
-            self.shared_cut(queries, members, threshold, visibility, stats, kd)
-        })
+        crate::dispatch::with_avx2(
+            #[inline(always)]
+            || self.shared_cut(queries, members, threshold, visibility, stats, kd),
+        )
     }
 
     /// [`shade_shared`](Self::shade_shared)'s work: the group's region, its

@@ -2,9 +2,9 @@
 
 use glam::{DVec3, Vec3};
 
-use super::{NodeEstimate, SUM_LIGHTS_MAX, Seal, Shader, ViewIndependent};
 use crate::PointLight;
 use crate::geometry::{Cone, GroupView, Surface};
+use crate::shader::{NodeEstimate, SUM_LIGHTS_MAX, Seal, Shader, ViewIndependent};
 use crate::tree::{LightTree, Node};
 
 /// The sum of two shaders, e.g. `Combined::new(Lambert::new(kd),
