@@ -4,8 +4,8 @@ use glam::{DVec3, Vec3};
 
 use crate::PointLight;
 use crate::geometry::{Cone, GroupView, Surface};
-use crate::shader::{NodeEstimate, SUM_LIGHTS_MAX, Seal, Shader, ViewIndependent};
-use crate::tree::{LightTree, Node};
+use crate::shader::{ChildrenOf, NodeEstimate, SUM_LIGHTS_MAX, Seal, Shader, ViewIndependent};
+use crate::tree::Node;
 
 /// The sum of two shaders, e.g. `Combined::new(Lambert::new(kd),
 /// Phong::new(ks, e))`: contributions add, and so do bounds (the sum of two
@@ -138,34 +138,25 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         _: Seal,
         p: &Self::PerPoint,
         s: &Surface,
-        tree: &LightTree,
-        parent: usize,
-        wanted: u8,
+        children: ChildrenOf<'_>,
         out: &mut [Option<NodeEstimate>],
     ) -> bool {
+        let ChildrenOf {
+            tree,
+            parent,
+            wanted,
+        } = children;
         let len = out.len().min(crate::tree::MAX_CHILDREN);
         let mut first = [None; crate::tree::MAX_CHILDREN];
         let mut second = [None; crate::tree::MAX_CHILDREN];
         // Into scratch, so that `out` is left alone if neither term has
         // coarse bounds.
-        let first_coarse = self.first.bound_children_coarse(
-            Seal,
-            &p.0,
-            s,
-            tree,
-            parent,
-            wanted,
-            &mut first[..len],
-        );
-        let second_coarse = self.second.bound_children_coarse(
-            Seal,
-            &p.1,
-            s,
-            tree,
-            parent,
-            wanted,
-            &mut second[..len],
-        );
+        let first_coarse =
+            self.first
+                .bound_children_coarse(Seal, &p.0, s, children, &mut first[..len]);
+        let second_coarse =
+            self.second
+                .bound_children_coarse(Seal, &p.1, s, children, &mut second[..len]);
         if !first_coarse && !second_coarse {
             return false;
         }

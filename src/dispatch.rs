@@ -62,27 +62,6 @@ fn run_avx2<T>(f: impl FnOnce() -> T) -> T {
     f()
 }
 
-/// [`with_avx2`] for the copies that also use fused multiply-adds.
-#[inline(always)]
-pub(crate) fn with_avx2_fma<T>(f: impl FnOnce() -> T) -> T {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if avx2_fma() {
-            // SAFETY: the processor has AVX2 and FMA (`avx2_fma` checked).
-            #[allow(unsafe_code)]
-            return unsafe { run_avx2_fma(f) };
-        }
-    }
-    f()
-}
-
-/// [`with_avx2_fma`]'s copy compiled for AVX2 and FMA.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn run_avx2_fma<T>(f: impl FnOnce() -> T) -> T {
-    f()
-}
-
 /// Whether the copies compiled for AVX2 may run.
 #[inline]
 pub(crate) fn avx2() -> bool {

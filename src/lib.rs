@@ -5,7 +5,7 @@
 //! Drettakis, *A Light Hierarchy for Fast Rendering of Scenes with Many
 //! Lights* (Eurographics 1998), and tightens its bounds: a [`LightTree`]
 //! groups point lights into an octree whose nodes are *virtual lights*
-//! (summed intensity at the weight-averaged position); a [`Shader`] evaluates
+//! (summed intensity at the weight-averaged position); a [`Shader`](shader::Shader) evaluates
 //! one light exactly and bounds a whole node; a [`Shading`] session picks,
 //! for each shading point, a cut through the tree with the paper's *error
 //! list* until the summed certified error meets a [`Threshold`], and returns
@@ -67,7 +67,7 @@
 //! plane (the sign of `N . (x_i - p)`), and whether it lies inside the Phong
 //! lobe (the sign of `r . w_i`, which is that of `R . (x_i - p)` with `R = 2
 //! (N.V) N - (N.N) V`: a polynomial in the inputs, no square root). Both
-//! come from error-free transformations ([`numeric`]), so a light exactly in
+//! come from error-free transformations, so a light exactly in
 //! the tangent plane or on the lobe's border contributes exactly 0, and one
 //! barely off it its value to about `1e-12` relative.
 //!
@@ -94,26 +94,20 @@
 //! per channel `k`, with `exact` the model above (the inputs taken as exact
 //! real numbers), provided the host's visibility classification is
 //! conservative ([`Visibility`]). Every node bound rounds its absolute
-//! errors outward (the slacks of [`numeric`], upward rounding of stored
-//! radii, moments and harmonic norms), and the cut folds its own `f64` summation error into
-//! the bound; the allowance covers what is left, the relative rounding of
-//! single terms and of the reference sum. The batch call
+//! errors outward (named slacks, each derived where it is defined; upward
+//! rounding of stored radii, moments and harmonic norms), and the cut folds
+//! its own `f64` summation error into the bound; the allowance covers what
+//! is left, the relative rounding of single terms and of the reference sum.
+//!
+//! Some sums and bounds run in `f32` where that is a negligible part of the
+//! target (relative targets of at least `2^-12`, without interpolation):
+//! [`Lambert`] sums small groups of visible lights and bounds the children
+//! of a refined node in `f32` lanes, and the batch call
 //! ([`Shading::shade_batch`]) sums a shared cut's estimates in `f32` lanes
-//! when the cut's certified error is at least `2^-12` of the radiance it
-//! aims at; each point then bounds the whole rounding of its `f32` sum
-//! (the offsets, every operation, the lanes' sums; a few hundred `f32`
-//! ulps of the terms' magnitudes, summed beside them) and its bound
-//! includes it, so the contract is the same. In the same way the cut,
-//! for a relative target of at least `2^-12` without interpolation, sums
-//! small groups of visible lights with [`Shader::sum_lights_coarse`]
-//! ([`Lambert`] in `f32` lanes) and adds each group's certified rounding
-//! bound to its own, keeping a group's coarse sum only where that bound is
-//! at most a thirty-second of the target share of the sum; and it bounds
-//! the children of the nodes it refines with
-//! [`Shader::bound_children_coarse`] ([`Lambert`]'s series bound in `f32`
-//! lanes, every step widened by its rounding as derived in its docs, so
-//! each bound is still certified, at most about `2^-13` of the node's `I
-//! kd / (D - R)^2` wider than the `f64` one).
+//! when its certified error is at least `2^-12` of the radiance it aims at.
+//! Each such sum or bound carries a certified bound on its own rounding
+//! (derived in the code beside it), which the reported bound includes, so
+//! the contract is the same.
 //!
 //! Where a term jumps, no allowance is needed, and none is widened: a
 //! single light's term is exactly 0 when the model's is (in the tangent
@@ -198,8 +192,8 @@ pub use tree::{LightTree, TreeBuilder};
 pub use visibility::{Coverage, NodeRegion, PointGroup, Unoccluded, Visibility};
 
 /// The type states of a [`Query`]: whether it carries a view direction
-/// ([`WithView`]) or not ([`NoView`]), and which a shader accepts
-/// ([`Accepts`]). A view-dependent shader given a query without a view does
+/// ([`WithView`](query::WithView)) or not ([`NoView`](query::NoView)), and
+/// which a shader accepts ([`Accepts`](query::Accepts)). A view-dependent shader given a query without a view does
 /// not compile; a renderer names these only in generic code over queries.
 pub mod query {
     pub use crate::shading::{Accepts, NoView, WithView};

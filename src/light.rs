@@ -40,7 +40,7 @@ impl PointLight {
     /// because it dominates every channel (`intensity[k] <= weight()` for each
     /// `k`): a node's centroid then stays where every channel has weight.
     /// Per-channel first and second moments and harmonic norms (see
-    /// [`Node`](crate::Node)) carry what one scalar weight cannot. For grey
+    /// [`Node`](crate::shader::Node)) carry what one scalar weight cannot. For grey
     /// lights it is the common channel value.
     #[must_use]
     pub fn weight(&self) -> f32 {
@@ -49,7 +49,7 @@ impl PointLight {
 }
 
 /// Eight lights side by side, one array of eight per quantity: what a
-/// shader's [`sum_lanes_coarse`](crate::Shader::sum_lanes_coarse) reads in
+/// shader's [`sum_lanes_coarse`](crate::shader::Shader::sum_lanes_coarse) reads in
 /// place of eight [`PointLight`]s, so that a vector register loads each
 /// quantity of all eight at once.
 ///

@@ -21,7 +21,7 @@
 use glam::DVec3;
 
 /// Absolute widening of every cosine bound computed by
-/// [`Cone::cos_range`](crate::Cone::cos_range).
+/// [`Cone::cos_range`](crate::shader::Cone::cos_range).
 ///
 /// The cosine and sine of the angle to the cone's axis come from a dot and a
 /// cross product of unit `f64` vectors, each within a few `f64::EPSILON` of
@@ -451,7 +451,7 @@ pub(crate) fn exact_dot_of_difference<const N: usize>(a: [&[f64]; 3], x: DVec3, 
 /// certify its result: plain `f64` ([`NAIVE_DOT_ACCEPT`]), the compensated
 /// [`dot2_of_difference`] ([`DOT2_ACCEPT`]), an exact expansion.
 ///
-/// [`Surface`]: crate::Surface
+/// [`Surface`]: crate::shader::Surface
 #[inline(always)]
 #[must_use]
 pub(crate) fn dot_of_difference(a: DVec3, x: DVec3, p: DVec3) -> f64 {

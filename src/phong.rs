@@ -36,7 +36,7 @@ const LOBE_LOG_SPACE_BELOW: f64 = 1e-280;
 /// `R = 2 (N.V) N - (N.N) V = |N|^2 |V| r` ([`Mirror`]), a polynomial in the
 /// given `f32` values. Each light's term decides that sign exactly (plain
 /// `f64` when it is safely away from 0, then a compensated dot product,
-/// then exact expansion arithmetic: see [`numeric`](crate::numeric)). So a
+/// then exact expansion arithmetic). So a
 /// light on the border (`r.w = 0`) contributes exactly 0, also for `e = 0`
 /// where the model jumps there, and no allowance is widened near the
 /// border. The value: the cosine is `R.(x - p) / (|R| d)`, its numerator
@@ -46,7 +46,7 @@ const LOBE_LOG_SPACE_BELOW: f64 = 1e-280;
 /// about `1.3e-12`, and an integer exponent up to 512 takes the power by
 /// repeated multiplication, at most `e - 1` roundings more (`5.7e-14` at
 /// 512; other exponents take `exp(e ln cos)`). Above
-/// ([`PHONG_SINE_ROUTE_ABOVE`]),
+/// (exponents above 512),
 /// lights near the axis take `1 - cos = sin^2 / (1 + cos)` from a
 /// compensated cross product, which makes the lobe's relative error about
 /// `|e ln cos|` times 30 ulps: every lobe that does not underflow is within

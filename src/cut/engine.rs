@@ -13,8 +13,8 @@ use crate::tree::{LightTree, Node};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 
 /// Where a cut's bounds must hold, and what it does with what it settles:
-/// one shading point ([`Point`](super::Point)) or every point of a group
-/// ([`Shared`](super::Shared)). The engine ([`Cut`]) calls these for what
+/// one shading point ([`Point`](super::point::Point)) or every point of a
+/// group ([`Shared`](super::group::Shared)). The engine ([`Cut`]) calls these for what
 /// depends on it; everything else (the list, refinement, admission of
 /// dark, coplanar and single-light nodes, visibility, budgets,
 /// interpolation) is the engine's.

@@ -7,9 +7,9 @@
 //! and stops when the threshold is met or the budget spent. Visibility,
 //! budgets, the specular criterion, interpolation across levels and the
 //! rules that sum small or near nodes light by light are written once,
-//! here; a [`Region`] supplies what depends on where the bounds must hold:
+//! here; a [`Region`](engine::Region) supplies what depends on where the bounds must hold:
 //!
-//! * [`Point`]: one shading point. A node's entry is the shader's
+//! * [`Point`](point::Point): one shading point. A node's entry is the shader's
 //!   certified interval at the point ([`Shader::bound`]); single lights
 //!   are evaluated and summed at once; the host is asked about a node when
 //!   the list takes it.

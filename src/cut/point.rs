@@ -16,7 +16,7 @@ use super::threshold::{Target, Threshold};
 use crate::LightLanes;
 use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, SUM_SLACK};
-use crate::shader::{NodeEstimate, Seal, Shader};
+use crate::shader::{ChildrenOf, NodeEstimate, Seal, Shader};
 use crate::tree::{LightTree, NO_PLANE, Node};
 use crate::visibility::Visibility;
 
@@ -202,13 +202,16 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
         if cut.region.coarse.is_some() && cut.work.nodes <= COARSE_NODES_MAX {
             let mut bounds = [None; CHILDREN];
             let region = &cut.region;
+            let children = ChildrenOf {
+                tree,
+                parent,
+                wanted,
+            };
             if cut.shader.bound_children_coarse(
                 Seal,
                 &region.per_point,
                 region.surface,
-                tree,
-                parent,
-                wanted,
+                children,
                 &mut bounds,
             ) {
                 for i in lanes {
@@ -315,7 +318,7 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
                 <= cut.budget
     }
 
-    /// As [`shade_small_scene`] does without a host, wherever the point
+    /// As [`shade_small_scene`](super::lights::shade_small_scene) does without a host, wherever the point
     /// lies: a tiny scene summed coarsely.
     #[inline(always)]
     fn summed_on_visible_root<V: Visibility>(cut: &mut Cut<'_, S, V, Self>) -> bool {

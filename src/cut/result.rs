@@ -68,7 +68,7 @@ impl ShadeResult {
     /// exact: a Lambert term is within `2^-40`, about `9e-13`, relative, a
     /// Phong term within about `4e-12` for every exponent; see
     /// [`Phong`](crate::Phong)), the plain `f64` sums of at most 16 visible
-    /// lights' terms ([`Shader::sum_lights`](crate::Shader::sum_lights),
+    /// lights' terms ([`Shader::sum_lights`](crate::shader::Shader::sum_lights),
     /// within `16 * 2^-53` relative, the terms being non-negative),
     /// relative rounding of node interval ends computed in `f64` (about
     /// `1e-12`), and the reference sum's own error (compensated, about

@@ -87,7 +87,7 @@ impl Threshold {
     /// exact sum, up to rounding). With a target of 0 the cut adds lights
     /// one at a time to its compensated sum, as
     /// [`Shading::exact_query`](crate::Shading::exact_query) does, rather
-    /// than a few at a time ([`Shader::sum_lights`](crate::Shader::sum_lights)),
+    /// than a few at a time ([`Shader::sum_lights`](crate::shader::Shader::sum_lights)),
     /// so that it returns the same value.
     #[must_use]
     pub const fn zero() -> Self {

@@ -66,7 +66,7 @@ impl Aabb {
 
     /// Smallest and largest distance from `origin` to a point of the box
     /// (the smallest is 0 when `origin` is inside), widened outward by
-    /// [`DISTANCE_SLACK`] for their `f64` rounding.
+    /// `8 f64::EPSILON` (relative) for their `f64` rounding.
     #[must_use]
     pub fn distance_range(&self, origin: DVec3) -> (f64, f64) {
         let (min, max) = (self.min.as_dvec3(), self.max.as_dvec3());
@@ -89,7 +89,7 @@ impl Aabb {
     /// Whether the whole box lies at or below the plane through `origin`
     /// with normal `normal` (not necessarily unit): `normal . (x - origin)
     /// <= 0` for every point `x` of the box. Decided *exactly* for an
-    /// `origin` holding `f32` values (as a [`Surface`](crate::Surface)'s
+    /// `origin` holding `f32` values (as a [`Surface`](crate::shader::Surface)'s
     /// point does): the sign of the highest corner's height comes from an
     /// error-free compensated dot product, with no slack, so a box lying
     /// exactly in the plane counts as at or below it. The empty box, which

@@ -86,7 +86,7 @@ impl Cone {
     /// with `cos_c = dir . axis` and `sin_c = |dir x axis|` (no `acos`: it
     /// loses half the digits near 0 and pi). When `theta_c + delta > pi` the
     /// formula for `cos_min` is at most 0, which is all the shaders use. Both
-    /// ends are widened by [`COS_SLACK`] and clamped to `[-1, 1]`.
+    /// ends are widened by `16 f64::EPSILON` and clamped to `[-1, 1]`.
     #[inline]
     #[must_use]
     pub fn cos_range(&self, dir: DVec3) -> (f64, f64) {

@@ -21,7 +21,7 @@ pub struct Surface {
     pub normal: DVec3,
     /// Unit direction from `p` towards the eye, `given_view` normalized in
     /// `f64`, or zero when none was given (only
-    /// [`ViewIndependent`](crate::ViewIndependent) shaders are shaded
+    /// [`ViewIndependent`](crate::shader::ViewIndependent) shaders are shaded
     /// without a view).
     pub view: DVec3,
     /// The caller's normal, exactly as given (any non-zero length).

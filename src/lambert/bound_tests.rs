@@ -15,8 +15,17 @@
 use glam::{DVec3, Vec3};
 use proptest::prelude::*;
 
-use crate::shader::{Cone, NodeEstimate, Seal, Shader, Surface};
+use crate::shader::{ChildrenOf, Cone, NodeEstimate, Seal, Shader, Surface};
 use crate::{BoundKind, Combined, Lambert, LightTree, Phong, PointLight, ShadeResult};
+
+/// The children of `parent` whose bits are set in `wanted`.
+fn children(tree: &LightTree, parent: usize, wanted: u8) -> ChildrenOf<'_> {
+    ChildrenOf {
+        tree,
+        parent,
+        wanted,
+    }
+}
 
 /// `default` cases per property, or `PROPTEST_CASES` where it is set.
 fn cases(default: u32) -> ProptestConfig {
@@ -297,7 +306,13 @@ fn check(tree: &LightTree, view: &View, kind: BoundKind, kd: Vec3) -> Result<boo
     // A coarse bound is only given by the series bound.
     if kind != BoundKind::Series {
         let mut out = [None; 8];
-        prop_assert!(!shader.bound_children_coarse(Seal, &(), &surface, tree, 0, 1, &mut out));
+        prop_assert!(!shader.bound_children_coarse(
+            Seal,
+            &(),
+            &surface,
+            children(tree, 0, 1),
+            &mut out
+        ));
     }
     for k in 0..3 {
         let allowance = ShadeResult::ROUNDING_ALLOWANCE * exact[k];
@@ -367,9 +382,7 @@ fn check_coarse(
             Seal,
             &(),
             surface,
-            tree,
-            parent,
-            wanted,
+            children(tree, parent, wanted),
             &mut out
         ));
         let Some(bound) = out[lane] else {
@@ -469,9 +482,7 @@ fn check_combined_coarse(
         Seal,
         &at,
         &surface,
-        tree,
-        parent,
-        1 << lane,
+        children(tree, parent, 1 << lane),
         &mut out
     ));
     let mut diffuse = [None; 8];
@@ -479,9 +490,7 @@ fn check_combined_coarse(
         Seal,
         &(),
         &surface,
-        tree,
-        parent,
-        1 << lane,
+        children(tree, parent, 1 << lane),
         &mut diffuse
     ));
     let node = &tree.nodes()[index];

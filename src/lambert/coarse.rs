@@ -1,6 +1,6 @@
 //! [`Lambert`](crate::Lambert)'s sum of visible lights in `f32`, eight
 //! lights side by side, with a certified bound on its error (see
-//! [`Shader::sum_lights_coarse`](crate::Shader::sum_lights_coarse)).
+//! [`Shader::sum_lights_coarse`](crate::shader::Shader::sum_lights_coarse)).
 //!
 //! # The rounding
 //!

@@ -161,7 +161,7 @@ pub(crate) struct PointView<T> {
 
 /// What the kernel reads of each lane's node besides its block: per
 /// channel `I_k kd_k`, and the build's bound `delta` on the rounding of its
-/// moments' sums ([`Node::moment_error`](crate::Node::moment_error)).
+/// moments' sums ([`Node::moment_error`](crate::shader::Node::moment_error)).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct LaneScales<const N: usize> {
     pub(crate) intensity: [[f64; N]; 3],

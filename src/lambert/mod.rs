@@ -16,9 +16,11 @@ use crate::lanes::{Lanes, Vec3Lanes, array};
 use crate::numeric::{
     COS_SLACK, NAIVE_DOT_ACCEPT, SECOND_ORDER_SLACK, SERIES_SLACK, dot_of_difference,
 };
-use crate::shader::{NodeEstimate, Seal, Shader, ViewIndependent, colour_or_clamped, try_colour};
+use crate::shader::{
+    ChildrenOf, NodeEstimate, Seal, Shader, ViewIndependent, colour_or_clamped, try_colour,
+};
+use crate::tree::Node;
 use crate::tree::groups::{Block, with_block};
-use crate::tree::{LightTree, Node};
 use crate::{LightLanes, PointLight, ShadeError};
 
 /// Which node bound a shader uses.
@@ -196,9 +198,9 @@ pub enum BoundKind {
 /// error are too.
 ///
 /// # Rounding
-/// Cosine bounds are widened by [`COS_SLACK`]. The series
-/// bound widens its estimate by [`SERIES_SLACK`] of its terms' magnitudes,
-/// by [`POINT_SLACK`](crate::numeric::POINT_SLACK) for the offset `c - p`, by
+/// Cosine bounds are widened by `16 f64::EPSILON`. The series
+/// bound widens its estimate by `1024 f64::EPSILON` of its terms' magnitudes,
+/// by `2 f64::EPSILON` for the offset `c - p`, by
 /// `f32::EPSILON (|o_k|_1 / D + 33 tr(S_k) / D^2)` for the `f32` storage of
 /// the moments (offsets rounded to nearest move the degree-1 term by at most
 /// `|grad| |o|_1 f32::EPSILON / 2 / D`, `|grad| <= 2`; the stored entries of
@@ -207,11 +209,11 @@ pub enum BoundKind {
 /// by `(15 * 3 + 3 + 6 * 3) / 2 = 33` of those), and by
 /// `2 delta (sigma + 18 sigma^2)` for the build's `f64` sums of the
 /// members' moments (each entry within `delta I_k R^j` of exact,
-/// `delta` the node's [`Node::moment_error`]);
-/// its remainder by [`SERIES_SLACK`] as documented there. Stored diagonals
+/// `delta` the node's [`Node::moment_error`](crate::shader::Node::moment_error));
+/// its remainder by `1024 f64::EPSILON` likewise. Stored diagonals
 /// of `S_k` and harmonic norms are rounded upward at build time, after an
 /// allowance for their `f64` sums. The Taylor bound widens its estimate by
-/// [`SECOND_ORDER_SLACK`] of its terms' magnitudes, by [`COS_SLACK`] times
+/// `64 f64::EPSILON` of its terms' magnitudes, by `16 f64::EPSILON` times
 /// `I_k / D^2` for the cosine, and by `f32::EPSILON` of the first-order
 /// term, and by the same `2 delta (sigma + 18 sigma^2)` as the series for
 /// the build's moment sums; the quadratic forms of `S_k` by
@@ -341,8 +343,7 @@ impl Shader for Lambert {
     /// given normal `N`, computed as `N.(x - p) / (|N| d^3)`. For a
     /// `position` holding `f32` values (every light's), the sign of `N.(x -
     /// p)` is exact and its value within `2^-40` relative, within about
-    /// `f64::EPSILON` near the plane (error-free transformations, see
-    /// [`numeric`](crate::numeric)): a light in the tangent plane
+    /// `f64::EPSILON` near the plane (error-free transformations): a light in the tangent plane
     /// contributes exactly 0, one barely above it its value to a few ulps.
     #[inline(always)]
     fn eval(&self, _: &(), surface: &Surface, position: DVec3, intensity: DVec3) -> DVec3 {
@@ -459,11 +460,14 @@ impl Shader for Lambert {
         _: Seal,
         _: &(),
         surface: &Surface,
-        tree: &LightTree,
-        parent: usize,
-        wanted: u8,
+        children: ChildrenOf<'_>,
         out: &mut [Option<NodeEstimate>],
     ) -> bool {
+        let ChildrenOf {
+            tree,
+            parent,
+            wanted,
+        } = children;
         if self.kind != BoundKind::Series {
             return false;
         }

@@ -12,7 +12,6 @@ use glam::{DVec3, Vec3};
 use crate::geometry::GroupView;
 pub use crate::geometry::{Cone, Surface};
 pub use crate::phong::Mirror;
-use crate::tree::LightTree;
 pub use crate::tree::Node;
 use crate::{LightLanes, PointLight, ShadeError};
 
@@ -24,9 +23,18 @@ use crate::{LightLanes, PointLight, ShadeError};
 mod sealed {
     #[derive(Clone, Copy, Debug)]
     pub struct Seal;
+
+    /// The children of node `parent` of `tree` whose bits are set in
+    /// `wanted` (child `first_child + i` is bit `i`).
+    #[derive(Clone, Copy, Debug)]
+    pub struct ChildrenOf<'t> {
+        pub tree: &'t crate::tree::LightTree,
+        pub parent: usize,
+        pub wanted: u8,
+    }
 }
 
-pub(crate) use sealed::Seal;
+pub(crate) use sealed::{ChildrenOf, Seal};
 
 /// The most lights the cut passes to one [`Shader::sum_lights`] call.
 pub(crate) const SUM_LIGHTS_MAX: usize = 16;
@@ -319,8 +327,8 @@ pub trait Shader {
         None
     }
 
-    /// Bounds the children of node `parent` of `tree` together, coarsely:
-    /// for each child `first_child + i` whose bit `i` is set in `wanted`,
+    /// Bounds the `children` of a node together, coarsely: for each child
+    /// `first_child + i` whose bit `i` is set in `wanted`,
     /// `out[i]` receives `Some` of a certified bound of the child (as
     /// [`bound`](Self::bound) gives, but computed in single precision,
     /// each end at most about `2^-13` of the child's `I kd / (D - R)^2`
@@ -347,12 +355,10 @@ pub trait Shader {
         _: Seal,
         point: &Self::PerPoint,
         surface: &Surface,
-        tree: &LightTree,
-        parent: usize,
-        wanted: u8,
+        children: ChildrenOf<'_>,
         out: &mut [Option<NodeEstimate>],
     ) -> bool {
-        let _ = (point, surface, tree, parent, wanted, out);
+        let _ = (point, surface, children, out);
         false
     }
 

@@ -143,7 +143,7 @@ impl<T, const N: usize> Default for Blocks<T, N> {
 }
 
 /// What an entry's lane shares between its terms: `1/D`, `1/D^2`, the unit
-/// axis and `c0 = n . uh`, computed as [`Cone::new`](crate::Cone::new)
+/// axis and `c0 = n . uh`, computed as [`Cone::new`](crate::shader::Cone::new)
 /// does.
 struct Geometry<T> {
     inv_d: T,

@@ -75,7 +75,7 @@ impl TreeBuilder {
     /// its lights' moments (up to degree 5) once, and every other node
     /// shifts its children's moments to its own centroid, with a certified
     /// bound on the rounding carried along (see
-    /// [`Node::moment_error`](crate::Node::moment_error)). The radii stay
+    /// [`Node::moment_error`](crate::shader::Node::moment_error)). The radii stay
     /// exact (the farthest member, rounded up): a leaf measures its lights'
     /// distances from the offsets its moment sums take, and every other
     /// node looks for its farthest member through its subtree, skipping the

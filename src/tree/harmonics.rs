@@ -1,6 +1,6 @@
 //! The real regular solid harmonics of degrees 3, 4 and 5: the multipole
 //! terms behind every node's harmonic norms
-//! ([`Node::harmonic_norms`](crate::Node::harmonic_norms)).
+//! ([`Node::harmonic_norms`](crate::shader::Node::harmonic_norms)).
 //!
 //! For degree `l` and order `m = 0..=l` the harmonic is `r^l P_l^m(cos
 //! theta)` times `cos(m phi)` and (for `m >= 1`) `sin(m phi)`, with `P_l^m`

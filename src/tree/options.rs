@@ -42,7 +42,7 @@
 /// axis, are not examined): a shading point whose tangent plane is exactly
 /// parallel to that plane, with the lights at or below it, receives exactly
 /// nothing from such a node under Lambert's model (see
-/// [`Shader::horizon`](crate::Shader::horizon)), and the cut settles it
+/// [`Shader::horizon`](crate::shader::Shader::horizon)), and the cut settles it
 /// without walking its lights. Scenes without such
 /// planes store nothing for them.
 ///
