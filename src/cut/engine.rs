@@ -341,50 +341,75 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
                 break;
             };
             R::taken(self, slot);
-            let parent = nesting.as_deref_mut().map(|n| n.taken(&top, slot));
             if refining {
                 // The next node to refine is probably the one waiting on top
                 // now: its children load while this one's are evaluated.
                 if let Some(next) = list.peek() {
                     self.tree.prefetch_refinement(next.node as usize);
                 }
-                let visible = top.seen == Seen::Visible;
-                match (nesting.as_deref_mut(), parent) {
-                    (Some(n), Some(parent)) => {
-                        // Children's priorities are capped at the parent's.
-                        let frame = n.refined(&top, parent);
-                        R::nested(self, n, frame, |cut, n| {
-                            cut.refine(top.node as usize, visible, 1.0, &mut |mut e: Entry| {
-                                e.key = e.key.min(top.key);
-                                list.push(e);
-                                n.pushed(&e, frame);
-                            });
-                        });
-                        n.finish(frame);
-                    }
-                    _ => self.refine(top.node as usize, visible, 1.0, &mut *list),
-                }
+                self.refine_taken(list, nesting.as_deref_mut(), top, slot);
             } else {
-                match (nesting.as_deref_mut(), parent) {
-                    (Some(n), Some(parent)) => {
-                        let mut entry = None;
-                        R::nested(self, n, parent, |cut, _| entry = cut.classify(node, top));
-                        if let Some(mut e) = entry {
-                            e.key = e.key.min(top.key);
-                            list.push(e);
-                            n.pushed(&e, parent);
-                        }
-                        n.finish(parent);
-                    }
-                    _ => {
-                        if let Some(e) = self.classify(node, top) {
-                            list.push(e);
-                        }
-                    }
-                }
+                self.classify_taken(list, nesting.as_deref_mut(), top, slot);
             }
         }
         outcome
+    }
+
+    /// Refines `top`, just taken from slot `slot` of the list: its
+    /// children (or lights) enter the cut. With `nesting` they are recorded
+    /// under a new frame, their priorities capped at `top`'s.
+    #[inline(always)]
+    fn refine_taken(
+        &mut self,
+        list: &mut ErrorList,
+        nesting: Option<&mut Nesting>,
+        top: Entry,
+        slot: u32,
+    ) {
+        let visible = top.seen == Seen::Visible;
+        let Some(n) = nesting else {
+            self.refine(top.node as usize, visible, 1.0, list);
+            return;
+        };
+        let parent = n.taken(&top, slot);
+        let frame = n.refined(&top, parent);
+        R::nested(self, n, frame, |cut, n| {
+            cut.refine(top.node as usize, visible, 1.0, &mut |mut e: Entry| {
+                e.key = e.key.min(top.key);
+                list.push(e);
+                n.pushed(&e, frame);
+            });
+        });
+        n.finish(frame);
+    }
+
+    /// Asks the host about `top`, just taken from slot `slot` of the list,
+    /// and puts it back as the answer says (see
+    /// [`classify`](Self::classify)).
+    #[inline(always)]
+    fn classify_taken(
+        &mut self,
+        list: &mut ErrorList,
+        nesting: Option<&mut Nesting>,
+        top: Entry,
+        slot: u32,
+    ) {
+        let node = &self.tree.nodes[top.node as usize];
+        let Some(n) = nesting else {
+            if let Some(e) = self.classify(node, top) {
+                list.push(e);
+            }
+            return;
+        };
+        let parent = n.taken(&top, slot);
+        let mut entry = None;
+        R::nested(self, n, parent, |cut, _| entry = cut.classify(node, top));
+        if let Some(mut e) = entry {
+            e.key = e.key.min(top.key);
+            list.push(e);
+            n.pushed(&e, parent);
+        }
+        n.finish(parent);
     }
 
     /// The root entering the cut: `None` when it was settled or dropped.

@@ -153,6 +153,20 @@ impl GroupScratch {
     }
 }
 
+/// What a group's cut may spend: its points would each cost alone about
+/// as much as `per_point` shared evaluations.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Spend {
+    /// Points in the group.
+    pub(crate) points: u64,
+    /// Shared evaluations allowed a point.
+    pub(crate) per_point: u64,
+}
+
+/// The shared cut aims at this fraction of the darkest sample's estimate
+/// for a relative target, leaving room for points darker than it.
+const FIRST_MARGIN: f64 = 0.9;
+
 /// The region of a group of points.
 pub(crate) struct Shared<'s> {
     /// The shader's diffuse albedo: the points' sums and the samples are
@@ -194,14 +208,14 @@ pub(crate) struct GroupCut<'c> {
 }
 
 impl<'s> Shared<'s> {
-    /// The region of a group of `points` points lying within `group`,
-    /// steered by `samples`, with diffuse albedo `kd`, allowed
-    /// `budget_per_point` shared evaluations a point.
+    /// The region of a group of points lying within `group`, steered by
+    /// `samples` (aiming at their darkest estimate times
+    /// [`FIRST_MARGIN`]), with diffuse albedo `kd`, allowed to `spend`.
     pub(crate) fn new(
         kd: DVec3,
-        (group, samples): (GroupBounds, Samples),
-        (points, budget_per_point): (u64, u64),
-        margin: f64,
+        group: GroupBounds,
+        samples: Samples,
+        spend: Spend,
         scratch: &'s mut GroupScratch,
     ) -> Self {
         scratch.clear();
@@ -209,13 +223,13 @@ impl<'s> Shared<'s> {
             kd,
             group,
             samples,
-            margin,
+            margin: FIRST_MARGIN,
             steer_settled: [DVec3::ZERO; SAMPLES],
             steer_waiting: [DVec3::ZERO; SAMPLES],
             light_error: DVec3::ZERO,
             spread: Spread::default(),
-            points,
-            budget_per_point,
+            points: spend.points,
+            budget_per_point: spend.per_point,
             scratch,
         }
     }
@@ -633,7 +647,8 @@ impl<'s, S: Shader, V: Visibility> Cut<'_, S, V, Shared<'s>> {
             &node.aabb,
             1.0 / nearest,
             distance,
-            (depth, nearest - radius),
+            depth,
+            nearest - radius,
         );
         Ok(Some((view, nearest, distance)))
     }

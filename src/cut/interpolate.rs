@@ -29,7 +29,7 @@ use glam::DVec3;
 
 use super::engine::{Cut, Region};
 use super::error_list::{Class, Entry, ErrorList, Seen};
-use super::point::{Point, reported_bound};
+use super::point::{Point, PointScratch, reported_bound};
 use super::threshold::{Target, Threshold};
 use crate::numeric::CompensatedSum;
 use crate::shader::Shader;
@@ -506,11 +506,11 @@ fn nest(
     )
 }
 
-/// Interpolation across levels after the error list met `threshold`
-/// (`top` the largest priority left, `after` the list's excess):
-/// the blended radiance and certified bound, or `None` to keep the list's
-/// cut (nothing refined, a target the blend cannot meet, or a budget the
-/// blend would exceed).
+/// Interpolation across levels after the error list (in `scratch`) met
+/// `threshold` with `radiance` and `bound`: the blended radiance and
+/// certified bound, or `None` to keep the list's cut (no interpolation
+/// asked for, nothing refined, a target the blend cannot meet, or a budget
+/// the blend would exceed).
 ///
 /// The level `tau` is where the blended cut just meets the target:
 /// `g(tau) = 0` for the excess `g` of the blend at level `tau` over the
@@ -526,17 +526,23 @@ fn nest(
 /// blend's arena, which is expanded once, for the lowest level tried.
 /// The per-node target's excess does not depend on the blend; it keeps
 /// the level placed between the list's last two steps ([`level`]).
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn interpolate<S: Shader, V: Visibility>(
     cut: &mut Cut<'_, S, V, Point<'_, S>>,
-    list: &ErrorList,
-    nesting: &mut Nesting,
-    items: &mut Vec<Item>,
+    scratch: &mut PointScratch,
     threshold: &Threshold,
-    band: f64,
     last_step: Option<(f64, f64)>,
-    (top, after): (f64, f64),
+    radiance: DVec3,
+    bound: DVec3,
 ) -> Option<(DVec3, DVec3)> {
+    let band = threshold.interpolation()?;
+    let PointScratch {
+        list,
+        nesting,
+        items,
+    } = scratch;
+    let top = list.largest();
+    let after = threshold.excess(radiance, bound, top);
+    let list = &*list;
     if list.len() == 0 {
         return None;
     }

@@ -74,22 +74,21 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
                     && range == (0..tree.lights.len())
                 {
                     // The whole of a small scene: its lights side by side.
-                    let (shader, per_point) = (self.shader, &self.region.per_point);
-                    let whole = whole_scene_sum(
-                        shader,
-                        per_point,
-                        self.region.surface,
+                    let region = &mut self.region;
+                    let scene = SmallScene {
+                        shader: self.shader,
+                        per_point: &region.per_point,
+                        surface: region.surface,
+                        lights: &tree.lights,
                         lanes,
-                        &tree.lights,
                         share,
-                    );
-                    settle_small_scene(
-                        shader,
-                        per_point,
-                        self.region.surface,
-                        (&tree.lights, lanes, whole),
-                        (share, weight),
-                        (&mut self.region.settled, &mut self.region.settled_error),
+                    };
+                    let whole = scene.whole();
+                    scene.settle(
+                        whole,
+                        weight,
+                        &mut region.settled,
+                        &mut region.settled_error,
                     );
                     return;
                 }
@@ -269,64 +268,79 @@ fn settle_visible<S: Shader>(
     }
 }
 
-/// The shader's [`Shader::sum_scene_coarse`] of a whole small scene,
-/// `lights` side by side in `lanes`, where its error is at most `share` of
-/// the sum channel by channel (what [`settle_small_scene`] takes first).
-#[inline(always)]
-fn whole_scene_sum<S: Shader>(
-    shader: &S,
-    per_point: &S::PerPoint,
-    surface: &Surface,
-    lanes: &[LightLanes],
-    lights: &[PointLight],
+/// A small scene's lights, and the same lights side by side in `lanes`,
+/// summed at one point by `shader` (per-point data `per_point`), coarse
+/// sums kept where their error is at most `share` of them channel by
+/// channel.
+struct SmallScene<'s, S: Shader> {
+    shader: &'s S,
+    per_point: &'s S::PerPoint,
+    surface: &'s Surface,
+    lights: &'s [PointLight],
+    lanes: &'s [LightLanes],
     share: f64,
-) -> Option<(DVec3, DVec3)> {
-    shader
-        .sum_scene_coarse(Seal, per_point, surface, lanes, lights.len())
-        .filter(|(sum, error)| error.cmple(*sum * share).all())
 }
 
-/// The sum of a whole small scene, `lights` and the same lights side by
-/// side in `lanes`, visible, times `weight`, settled into `settled` and its
-/// error into `error_sum`: `whole`, the scene's [`whole_scene_sum`], where
-/// it was kept; else [`COARSE_LIGHTS_MAX`] lights at a time: the shader's
-/// [`Shader::sum_lanes_coarse`] where it has one, else its
-/// [`Shader::sum_lights_coarse`], kept where the sum's error is at most
-/// `share` of it channel by channel (as [`Cut::sum_seen_coarse`]); else
-/// [`settle_visible`].
-#[inline(always)]
-fn settle_small_scene<S: Shader>(
-    shader: &S,
-    per_point: &S::PerPoint,
-    surface: &Surface,
-    (lights, lanes, whole): (&[PointLight], &[LightLanes], Option<(DVec3, DVec3)>),
-    (share, weight): (f64, f64),
-    (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
-) {
-    if let Some((sum, error)) = whole {
-        settled.add(sum * weight);
-        *error_sum += error * weight;
-        return;
+impl<S: Shader> SmallScene<'_, S> {
+    /// The shader's [`Shader::sum_scene_coarse`] of the whole scene, where
+    /// its error is at most `share` of the sum channel by channel (what
+    /// [`settle`](Self::settle) takes first).
+    #[inline(always)]
+    fn whole(&self) -> Option<(DVec3, DVec3)> {
+        self.shader
+            .sum_scene_coarse(
+                Seal,
+                self.per_point,
+                self.surface,
+                self.lanes,
+                self.lights.len(),
+            )
+            .filter(|(sum, error)| error.cmple(*sum * self.share).all())
     }
-    // Lights `start..` and their lanes from `start / 8` (a multiple of
-    // eight): an index rather than zipped chunks, whose lengths take
-    // divisions.
-    let mut start = 0;
-    while start < lights.len() && start / 8 < lanes.len() {
-        let end = (start + COARSE_LIGHTS_MAX).min(lights.len());
-        let first = start / 8;
-        let lanes = &lanes[first..(first + COARSE_LIGHTS_MAX / 8).min(lanes.len())];
-        let lights = &lights[start..end];
-        start = end;
-        let sum = shader
-            .sum_lanes_coarse(Seal, per_point, surface, lanes, lights.len())
-            .or_else(|| shader.sum_lights_coarse(Seal, per_point, surface, lights));
-        match sum {
-            Some((sum, error)) if error.cmple(sum * share).all() => {
-                settled.add(sum * weight);
-                *error_sum += error * weight;
+
+    /// The sum of the scene, visible, times `weight`, settled into
+    /// `settled` and its error into `error_sum`: `whole`, the scene's
+    /// [`whole`](Self::whole) sum, where it was kept; else
+    /// [`COARSE_LIGHTS_MAX`] lights at a time: the shader's
+    /// [`Shader::sum_lanes_coarse`] where it has one, else its
+    /// [`Shader::sum_lights_coarse`], kept where the sum's error is at most
+    /// `share` of it channel by channel (as `Cut::sum_seen_coarse`); else
+    /// [`settle_visible`].
+    #[inline(always)]
+    fn settle(
+        &self,
+        whole: Option<(DVec3, DVec3)>,
+        weight: f64,
+        settled: &mut CompensatedSum,
+        error_sum: &mut DVec3,
+    ) {
+        let (shader, per_point, surface) = (self.shader, self.per_point, self.surface);
+        if let Some((sum, error)) = whole {
+            settled.add(sum * weight);
+            *error_sum += error * weight;
+            return;
+        }
+        // Lights `start..` and their lanes from `start / 8` (a multiple of
+        // eight): an index rather than zipped chunks, whose lengths take
+        // divisions.
+        let (all, lanes) = (self.lights, self.lanes);
+        let mut start = 0;
+        while start < all.len() && start / 8 < lanes.len() {
+            let end = (start + COARSE_LIGHTS_MAX).min(all.len());
+            let first = start / 8;
+            let lanes = &lanes[first..(first + COARSE_LIGHTS_MAX / 8).min(lanes.len())];
+            let lights = &all[start..end];
+            start = end;
+            let sum = shader
+                .sum_lanes_coarse(Seal, per_point, surface, lanes, lights.len())
+                .or_else(|| shader.sum_lights_coarse(Seal, per_point, surface, lights));
+            match sum {
+                Some((sum, error)) if error.cmple(sum * self.share).all() => {
+                    settled.add(sum * weight);
+                    *error_sum += error * weight;
+                }
+                _ => settle_visible(shader, per_point, surface, lights, weight, settled),
             }
-            _ => settle_visible(shader, per_point, surface, lights, weight, settled),
         }
     }
 }
@@ -387,25 +401,25 @@ pub(crate) fn shade_small_scene<S: Shader, V: Visibility>(
         return None;
     }
     let per_point = shader.prepare(surface);
-    // What `settle_small_scene` leaves in empty sums: where the whole
+    let scene = SmallScene {
+        shader,
+        per_point: &per_point,
+        surface,
+        lights: &tree.lights,
+        lanes,
+        share,
+    };
+    // What `SmallScene::settle` leaves in empty sums: where the whole
     // scene's sum is kept, the sum itself (a compensated sum of one term
     // from zero is the term) and its error.
-    let (settled, settled_error) =
-        match whole_scene_sum(shader, &per_point, surface, lanes, &tree.lights, share) {
-            Some(sum) => sum,
-            None => {
-                let (mut settled, mut error) = (CompensatedSum::default(), DVec3::ZERO);
-                settle_small_scene(
-                    shader,
-                    &per_point,
-                    surface,
-                    (&tree.lights, lanes, None),
-                    (share, 1.0),
-                    (&mut settled, &mut error),
-                );
-                (settled.value(), error)
-            }
-        };
+    let (settled, settled_error) = match scene.whole() {
+        Some(sum) => sum,
+        None => {
+            let (mut settled, mut error) = (CompensatedSum::default(), DVec3::ZERO);
+            scene.settle(None, 1.0, &mut settled, &mut error);
+            (settled.value(), error)
+        }
+    };
     // As the cut's end with an empty error list: its sums are +0.
     Some(ShadeResult {
         radiance: settled + DVec3::ZERO,

@@ -36,9 +36,9 @@ mod result;
 mod threshold;
 
 pub(crate) use engine::{Cut, Outcome};
-pub(crate) use group::{GroupCut, GroupScratch, SAMPLES, Samples, Shared, Spread};
+pub(crate) use group::{GroupCut, GroupScratch, SAMPLES, Samples, Shared, Spend, Spread};
 #[cfg(test)]
 pub(crate) use lights::shade_small_scene;
-pub(crate) use point::{PointScratch, reported_bound, shade_point};
+pub(crate) use point::{Lent, PointScratch, reported_bound, shade_point};
 pub use result::{ShadeResult, Stop};
 pub use threshold::{Target, Threshold};

@@ -510,20 +510,33 @@ pub(crate) struct PointScratch {
     pub(crate) items: Vec<Item>,
 }
 
-/// Shades one point: the cut through `tree` for `shader` at `surface`
+/// What a session lends a point's cut: the tree, the shader and, for a
+/// small scene, its lights side by side.
+#[derive(Clone, Copy)]
+pub(crate) struct Lent<'a, S> {
+    pub(crate) tree: &'a LightTree,
+    pub(crate) shader: &'a S,
+    pub(crate) small_lanes: Option<&'a [LightLanes]>,
+}
+
+/// Shades one point: the cut through the tree for the shader at `surface`
 /// (`point` as the host gave it) until `threshold` is met, with the
 /// interpolation across levels where it asks for one. Inlined into each
 /// compiled copy of the shading call.
 #[inline(always)]
 pub(crate) fn shade_point<S: Shader, V: Visibility>(
-    tree: &LightTree,
-    shader: &S,
-    small_lanes: Option<&[LightLanes]>,
-    (surface, point): (&Surface, Vec3),
+    lent: Lent<'_, S>,
+    surface: &Surface,
+    point: Vec3,
     threshold: &Threshold,
     visibility: V,
     scratch: &mut PointScratch,
 ) -> ShadeResult {
+    let Lent {
+        tree,
+        shader,
+        small_lanes,
+    } = lent;
     if let Some(lanes) = small_lanes
         && let Some(result) =
             super::lights::shade_small_scene::<S, V>(tree, shader, lanes, surface, threshold)
@@ -532,12 +545,8 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
     }
     let region = Point::new(shader, surface, point, threshold, small_lanes);
     let mut cut = Cut::new(tree, shader, region, threshold, visibility);
-    let PointScratch {
-        list,
-        nesting,
-        items,
-    } = scratch;
     let interpolating = threshold.interpolation().is_some();
+    let (list, nesting) = (&mut scratch.list, &mut scratch.nesting);
     cut.enter_root(list, interpolating.then_some(&mut *nesting));
     let outcome: Outcome = cut.run(list, threshold, interpolating.then_some(&mut *nesting));
     let unbounded = list.has_unbounded();
@@ -551,25 +560,15 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
             reported_bound(error + cut.region.settled_error),
         )
     };
-    if let (Some(band), Stop::ThresholdMet) = (threshold.interpolation(), outcome.stop) {
-        let top = list.largest();
-        let after = threshold.excess(radiance, bound, top);
+    if outcome.stop == Stop::ThresholdMet
         // The blend's bound is re-checked; for the per-node target the
         // blend refines no node less than the error list did, so the
         // largest single error cannot grow.
-        if let Some((r, e)) = interpolate::interpolate(
-            &mut cut,
-            list,
-            nesting,
-            items,
-            threshold,
-            band,
-            outcome.last_step,
-            (top, after),
-        ) && threshold.met(r, e, 0.0)
-        {
-            (radiance, bound) = (r, e);
-        }
+        && let Some((r, e)) =
+            interpolate::interpolate(&mut cut, scratch, threshold, outcome.last_step, radiance, bound)
+        && threshold.met(r, e, 0.0)
+    {
+        (radiance, bound) = (r, e);
     }
     ShadeResult {
         radiance,

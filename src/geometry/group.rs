@@ -121,7 +121,8 @@ impl GroupBounds {
         aabb: &Aabb,
         inv_nearest: f64,
         distance: f64,
-        (depth, gap): (f64, f64),
+        depth: f64,
+        gap: f64,
     ) -> GroupView {
         let far = (distance + self.radius) * (1.0 + DISTANCE_SLACK);
         let centre_height = self.normal.dot(centroid - self.centre).abs();

@@ -12,7 +12,7 @@ use core::fmt;
 use glam::{DVec3, Vec3};
 
 use crate::cut::policy::is_small_scene;
-use crate::cut::{GroupScratch, shade_point};
+use crate::cut::{GroupScratch, Lent, shade_point};
 use crate::shader::{Shader, ViewIndependent};
 use crate::tree::LightTree;
 use crate::visibility::{Unoccluded, Visibility};
@@ -142,12 +142,16 @@ impl<'t, S: Shader> Shading<'t, S> {
         threshold: &Threshold,
         visibility: V,
     ) -> ShadeResult {
-        let (tree, shader, lanes) = (self.tree, &self.shader, self.small_lanes.as_deref());
+        let lent = Lent {
+            tree: self.tree,
+            shader: &self.shader,
+            small_lanes: self.small_lanes.as_deref(),
+        };
         let scratch = &mut self.scratch.point;
-        let at = (query.surface(), query.point());
+        let (surface, point) = (query.surface(), query.point());
         crate::dispatch::with_avx2(
             #[inline(always)]
-            || shade_point(tree, shader, lanes, at, threshold, visibility, scratch),
+            || shade_point(lent, surface, point, threshold, visibility, scratch),
         )
     }
 

@@ -6,7 +6,7 @@
 use glam::DVec3;
 
 use super::{Batch, HaloResult, Members, Outcome};
-use crate::cut::{Cut, GroupCut, SAMPLES, Samples, Shared, reported_bound};
+use crate::cut::{Cut, GroupCut, SAMPLES, Samples, Shared, Spend, reported_bound};
 use crate::geometry::GroupBounds;
 use crate::numeric::CompensatedSum;
 use crate::shader::{Seal, Shader};
@@ -29,9 +29,6 @@ const MIN_BUDGET_PER_POINT: u64 = 32;
 /// Lights a point shaded alone evaluates exactly in the time of one node
 /// bound, in the estimate of what a point costs alone.
 const LIGHTS_PER_BOUND: f64 = 4.0;
-/// The shared cut aims at this fraction of the representative point's
-/// estimate for a relative target, leaving room for points darker than it.
-const FIRST_MARGIN: f64 = 0.9;
 /// Rounds of further refinement for the points of a group that missed
 /// their target, before they are shaded on their own.
 const ROUNDS: usize = 3;
@@ -226,13 +223,11 @@ impl<S: Shader> Shading<'_, S> {
         } = self;
         let (tree, batch) = (*tree, &mut scratch.batch);
         let budget_per_point = ((BUDGET_SHARE * batch.alone_cost) as u64).max(MIN_BUDGET_PER_POINT);
-        let region = Shared::new(
-            kd,
-            (group, samples),
-            (members.len() as u64, budget_per_point),
-            FIRST_MARGIN,
-            &mut scratch.group,
-        );
+        let spend = Spend {
+            points: members.len() as u64,
+            per_point: budget_per_point,
+        };
+        let region = Shared::new(kd, group, samples, spend, &mut scratch.group);
         let list = &mut scratch.point.list;
         let mut cut = Cut::new(tree, &*shader, region, threshold, visibility);
         cut.enter_root(list, None);
@@ -262,37 +257,20 @@ impl<S: Shader> Shading<'_, S> {
             }
             let shared = cut.region.group_cut(list, blended.as_ref());
             let over = packing.pack(&mut batch.packed, tree, &shared, &cut.region);
+            let points = Points {
+                queries,
+                members: group_members,
+                shader: &*shader,
+                cut: &shared,
+                over: &over,
+            };
             // Without interpolation a point that met its target on an
             // earlier round keeps that result: the further rounds are for
             // the points that missed. (Interpolated points all take the last
             // round's blend, which keeps the group's image smooth.)
             let keep_met = round > 0 && threshold.interpolation().is_none();
-            let mut darkest = f64::INFINITY;
-            for (k, &i) in members.iter().enumerate() {
-                if keep_met && !batch.alone[k] {
-                    continue;
-                }
-                let query = &queries[i as usize];
-                let r = over.result(point_sum(
-                    &*shader,
-                    &shared,
-                    &batch.packed,
-                    query,
-                    cut.visibility,
-                ));
-                let alone = !threshold.met(r.radiance, r.error_bound, largest);
-                (batch.results[k], batch.alone[k]) = (r, alone);
-                if alone {
-                    darkest = darkest.min(r.radiance.max_element());
-                }
-            }
-            // The halo's points over the same cut (interpolation only).
-            batch.halo_results.clear();
-            for &(i, _) in group_members.halo {
-                let query = &queries[i as usize];
-                let sum = point_sum(&*shader, &shared, &batch.packed, query, cut.visibility);
-                batch.halo_results.push(over.result(sum));
-            }
+            let met = |r: &ShadeResult| threshold.met(r.radiance, r.error_bound, largest);
+            let darkest = points.sum(batch, cut.visibility, keep_met, met);
             if let Some(b) = blended {
                 cut.unblend(b);
             }
@@ -314,6 +292,65 @@ impl<S: Shader> Shading<'_, S> {
         stats.shared_points += shared;
         stats.points_alone += members.len() as u32 - shared;
         Ok(())
+    }
+}
+
+/// The points of a group (and of its halo) and what they sum over one
+/// round's cut.
+struct Points<'p, 'c, M, S> {
+    queries: &'p [Query<M>],
+    members: Members<'p>,
+    shader: &'p S,
+    cut: &'p GroupCut<'c>,
+    over: &'p Packed,
+}
+
+impl<M, S: Shader> Points<'_, '_, M, S> {
+    /// Each member's result over the cut into the batch scratch, with
+    /// whether it missed its target (`met` says), and each halo point's;
+    /// with `keep_met`, members that met their target on an earlier round
+    /// keep that result. Returns the radiance of the darkest member that
+    /// missed its target (infinite if none).
+    #[inline(always)]
+    fn sum<V: Visibility>(
+        &self,
+        batch: &mut super::BatchScratch,
+        visibility: &mut V,
+        keep_met: bool,
+        met: impl Fn(&ShadeResult) -> bool,
+    ) -> f64 {
+        let mut darkest = f64::INFINITY;
+        for (k, &i) in self.members.points.iter().enumerate() {
+            if keep_met && !batch.alone[k] {
+                continue;
+            }
+            let r = self.result(i, &batch.packed, visibility);
+            let alone = !met(&r);
+            (batch.results[k], batch.alone[k]) = (r, alone);
+            if alone {
+                darkest = darkest.min(r.radiance.max_element());
+            }
+        }
+        // The halo's points over the same cut (interpolation only).
+        batch.halo_results.clear();
+        for &(i, _) in self.members.halo {
+            let r = self.result(i, &batch.packed, visibility);
+            batch.halo_results.push(r);
+        }
+        darkest
+    }
+
+    /// Query `i`'s result over the cut, `packed` its packed entries.
+    #[inline(always)]
+    fn result<V: Visibility>(
+        &self,
+        i: u32,
+        packed: &crate::shading::packed::Packed,
+        visibility: &mut V,
+    ) -> ShadeResult {
+        let query = &self.queries[i as usize];
+        self.over
+            .result(point_sum(self.shader, self.cut, packed, query, visibility))
     }
 }
 
