@@ -85,6 +85,29 @@ impl LightTree {
         self.lights.is_empty()
     }
 
+    /// The options the tree was built with, which
+    /// [`rebuild`](Self::rebuild) keeps: to rebuild on rayon's pool with
+    /// them, `tree.options().rebuild_parallel(&mut tree, &lights)`.
+    ///
+    /// ```
+    /// use glam::Vec3;
+    /// use manylights::{LightTree, PointLight};
+    ///
+    /// let lights: Vec<PointLight> = (0..100)
+    ///     .map(|i| PointLight::new(Vec3::new(i as f32, 0.0, 1.0), Vec3::ONE))
+    ///     .collect();
+    /// let builder = LightTree::builder().max_leaf_lights(4);
+    /// let mut tree = builder.build(&lights)?;
+    /// assert_eq!(tree.options(), builder);
+    /// tree.rebuild(&lights[..50])?;
+    /// assert_eq!(tree.options(), builder);
+    /// # Ok::<(), manylights::BuildError>(())
+    /// ```
+    #[must_use]
+    pub fn options(&self) -> TreeBuilder {
+        self.options
+    }
+
     /// Number of levels below the root (0 for a single leaf).
     #[inline]
     pub fn depth(&self) -> u32 {
