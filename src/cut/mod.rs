@@ -33,12 +33,14 @@ mod lights;
 mod point;
 pub(crate) mod policy;
 mod result;
+mod steering;
 mod threshold;
 
 pub(crate) use engine::{Cut, Outcome};
-pub(crate) use group::{GroupCut, GroupScratch, SAMPLES, Samples, Shared, Spend, Spread};
+pub(crate) use group::{GroupCut, GroupScratch, Shared, Spend};
 #[cfg(test)]
 pub(crate) use lights::shade_small_scene;
 pub(crate) use point::{Lent, PointScratch, reported_bound, shade_point};
 pub use result::{ShadeResult, Stop};
+pub(crate) use steering::{SAMPLES, Samples, Spread};
 pub use threshold::{Target, Threshold};
