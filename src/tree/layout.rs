@@ -103,7 +103,6 @@ impl LightTree {
     /// assert_eq!(tree.options(), builder);
     /// # Ok::<(), manylights::BuildError>(())
     /// ```
-    #[must_use]
     pub fn options(&self) -> TreeBuilder {
         self.options
     }
