@@ -8,6 +8,7 @@ use glam::{DVec3, Vec3};
 
 use super::Lambert;
 use crate::PointLight;
+use crate::dispatch::avx2_or;
 use crate::geometry::Surface;
 use crate::lanes::Vec3Lanes;
 use crate::numeric::NAIVE_DOT_ACCEPT;
@@ -17,20 +18,17 @@ impl Lambert {
     /// [`Shader::eval_lights`]: on `x86_64` processors with AVX2, in a copy
     /// compiled for AVX2 (the same bits, see [`dispatch`](crate::dispatch)).
     /// Out of line, compiled once.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
+    // Not `with_avx2`: its closure stays out of line, with no AVX2 instructions (measured).
     #[inline(never)]
     pub(super) fn eval_group(&self, surface: &Surface, lights: &[PointLight], out: &mut [DVec3]) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                unsafe { self.eval_group_avx2(surface, lights, out) };
-                return;
-            }
-        }
-        self.eval_group_inlined(surface, lights, out);
+        avx2_or!(
+            Self::eval_group_avx2,
+            Self::eval_group_inlined,
+            self,
+            surface,
+            lights,
+            out
+        );
     }
 
     /// [`eval_group`](Self::eval_group) compiled for AVX2.
@@ -85,19 +83,15 @@ impl Lambert {
     /// [`Shader::sum_lights`]: on `x86_64` processors with AVX2, written
     /// with its vector instructions (the same bits, see
     /// [`dispatch`](crate::dispatch)). Out of line, compiled once.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
     #[inline(never)]
     pub(super) fn sum_group(&self, surface: &Surface, lights: &[PointLight]) -> DVec3 {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                return unsafe { self.sum_group_avx2(surface, lights) };
-            }
-        }
-        self.sum_group_baseline(surface, lights)
+        avx2_or!(
+            Self::sum_group_avx2,
+            Self::sum_group_baseline,
+            self,
+            surface,
+            lights
+        )
     }
 
     /// [`sum_group`](Self::sum_group), four lanes of `f64`: lane `i` takes

@@ -41,6 +41,7 @@ mod series;
 mod shared;
 mod taylor;
 
+use crate::dispatch::avx2_or;
 use crate::geometry::{Cone, GroupView, Surface};
 use crate::numeric::dot_of_difference;
 use crate::shader::{NodeEstimate, Seal, Shader, ViewIndependent, colour_or_clamped, try_colour};
@@ -209,23 +210,6 @@ impl Lambert {
     }
 }
 
-/// The coarse sum of the `coarse` module's AVX2 copy `$avx2` where the
-/// processor has AVX2, else of its baseline `$baseline`, on the same
-/// arguments (the same bits either way): the body of each of `Lambert`'s
-/// coarse sums, whose callers allow the unsafe call.
-macro_rules! coarse_sum {
-    ($avx2:ident, $baseline:ident, $($arg:expr),+) => {{
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                return unsafe { coarse::$avx2($($arg),+) };
-            }
-        }
-        coarse::$baseline($($arg),+)
-    }};
-}
-
 impl Shader for Lambert {
     type PerPoint = ();
 
@@ -303,9 +287,6 @@ impl Shader for Lambert {
     /// times `sum max_k I_k / d^2` over the lights (per channel), for
     /// squared distances between `2^-60` and `2^60` and intensities up to
     /// `2^40` (else `None`), at a point that is an `f32` value.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
     #[inline]
     fn sum_lights_coarse(
         &self,
@@ -314,14 +295,17 @@ impl Shader for Lambert {
         surface: &Surface,
         lights: &[PointLight],
     ) -> Option<(DVec3, DVec3)> {
-        coarse_sum!(sum_avx2, sum_baseline, self.kd, surface, lights)
+        avx2_or!(
+            coarse::sum_avx2,
+            coarse::sum_baseline,
+            self.kd,
+            surface,
+            lights
+        )
     }
 
     /// The same bits as [`sum_lights_coarse`](Shader::sum_lights_coarse)
     /// on the same lights, each quantity of eight lights loaded at once.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
     #[inline]
     fn sum_lanes_coarse(
         &self,
@@ -331,9 +315,9 @@ impl Shader for Lambert {
         lanes: &[LightLanes],
         count: usize,
     ) -> Option<(DVec3, DVec3)> {
-        coarse_sum!(
-            sum_lanes_avx2,
-            sum_lanes_baseline,
+        avx2_or!(
+            coarse::sum_lanes_avx2,
+            coarse::sum_lanes_baseline,
             self.kd,
             surface,
             lanes,
@@ -345,9 +329,6 @@ impl Shader for Lambert {
     /// [`sum_lanes_coarse`](Shader::sum_lanes_coarse), their lanes added
     /// in `f64`: the same bound (see the rounding analysis of the coarse
     /// sums), one call for the whole scene.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
     #[inline]
     fn sum_scene_coarse(
         &self,
@@ -357,9 +338,9 @@ impl Shader for Lambert {
         lanes: &[LightLanes],
         count: usize,
     ) -> Option<(DVec3, DVec3)> {
-        coarse_sum!(
-            sum_scene_lanes_avx2,
-            sum_scene_lanes_baseline,
+        avx2_or!(
+            coarse::sum_scene_lanes_avx2,
+            coarse::sum_scene_lanes_baseline,
             self.kd,
             surface,
             lanes,

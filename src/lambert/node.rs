@@ -11,6 +11,7 @@ use glam::DVec3;
 use super::series::{Rgb, WidthInput, degree_two_lanes, rgb, series_width};
 use super::taylor::Geometry;
 use super::{BoundKind, Lambert};
+use crate::dispatch::avx2_or;
 use crate::geometry::{Cone, Surface};
 use crate::lanes::{Lanes, Vec3Lanes, array};
 use crate::numeric::{COS_SLACK, SECOND_ORDER_SLACK, SERIES_SLACK};
@@ -51,9 +52,7 @@ impl Lambert {
     /// AVX2, in a copy compiled for AVX2 (the same bits, see
     /// [`dispatch`](crate::dispatch)). Out of line, so that the bound is
     /// compiled once, not into every copy of the cut.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
+    // Not `with_avx2`: its closure stays out of line, with no AVX2 instructions (measured).
     #[inline(never)]
     fn bound_group(
         &self,
@@ -62,15 +61,15 @@ impl Lambert {
         cones: &[Cone],
         out: &mut [NodeEstimate],
     ) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                unsafe { self.bound_group_avx2(surface, nodes, cones, out) };
-                return;
-            }
-        }
-        self.bound_group_inlined(surface, nodes, cones, out);
+        avx2_or!(
+            Self::bound_group_avx2,
+            Self::bound_group_inlined,
+            self,
+            surface,
+            nodes,
+            cones,
+            out
+        );
     }
 
     /// [`bound_group`](Self::bound_group) compiled for AVX2.
