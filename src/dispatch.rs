@@ -16,6 +16,19 @@
 //! one), the same operations lane by lane as its baseline copy; so are the
 //! build's direct sums of a leaf's moments (the same fused multiply-adds,
 //! and the lanes' sums in the same order).
+//!
+//! Two ways in, and every `unsafe` call of a copy is in this file:
+//!
+//! * [`with_avx2`] (and [`with_avx512f_or_avx2`]) runs an
+//!   `#[inline(always)]` closure from a function compiled for the feature:
+//!   the closure and the `#[inline(always)]` code it calls are compiled
+//!   again there. A whole hot path gets its copy this way: a point's cut,
+//!   a group's cut, a group's points' sums.
+//! * [`avx2_or!`] (and [`copy_or!`] for another check) calls one of two
+//!   functions given by name: a kernel written with the feature's
+//!   instructions themselves beside its baseline (a leaf's sums, Morton
+//!   codes, a leaf's moments), or a function that calls itself (the
+//!   build's recursive pass), which a closure cannot.
 
 /// Whether the processor has `$feature` (a literal), unless a test asked
 /// for the baseline copies on this thread.
@@ -81,18 +94,51 @@ fn run_avx2<T>(f: impl FnOnce() -> T) -> T {
 /// a point).
 macro_rules! avx2_or {
     ($avx2:path, $baseline:path, $($arg:expr),+ $(,)?) => {
+        $crate::dispatch::copy_or!(avx2, $avx2, $baseline, $($arg),+)
+    };
+}
+pub(crate) use avx2_or;
+
+/// [`avx2_or!`] for any check of [this module](self): `$check` names one
+/// of [`avx2`], [`avx2_fma`], [`avx512f`].
+macro_rules! copy_or {
+    ($check:ident, $fast:path, $baseline:path, $($arg:expr),+ $(,)?) => {
         'choice: {
             #[cfg(target_arch = "x86_64")]
-            if $crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
+            if $crate::dispatch::$check() {
+                // SAFETY: the processor has the features `$fast` is compiled
+                // for (`$check` checked).
                 #[allow(unsafe_code)]
-                break 'choice unsafe { $avx2($($arg),+) };
+                break 'choice unsafe { $fast($($arg),+) };
             }
             $baseline($($arg),+)
         }
     };
 }
-pub(crate) use avx2_or;
+pub(crate) use copy_or;
+
+/// Runs `f` compiled for AVX-512F where the processor has it, else for
+/// AVX2 where it has that, else as the baseline build (see
+/// [`with_avx2`]; `f` must be an `#[inline(always)]` closure).
+#[inline(always)]
+pub(crate) fn with_avx512f_or_avx2<T>(f: impl FnOnce() -> T) -> T {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if avx512f() {
+            // SAFETY: the processor has AVX-512F (`avx512f` checked).
+            #[allow(unsafe_code)]
+            return unsafe { run_avx512f(f) };
+        }
+    }
+    with_avx2(f)
+}
+
+/// [`with_avx512f_or_avx2`]'s copy compiled for AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn run_avx512f<T>(f: impl FnOnce() -> T) -> T {
+    f()
+}
 
 /// Whether the copies compiled for AVX2 may run.
 #[inline]

@@ -540,43 +540,20 @@ impl Packed {
     /// Every entry must lie farther from the point than its radius (the
     /// shared cut guarantees it), so `D > 0`; and the point must lie within
     /// the group that [`start`](Self::start) was told of.
-    // Calling the copies compiled for wider vectors once the processor is
-    // known to have them is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
-    pub(crate) fn sum(&self, point: DVec3, normal: DVec3) -> PackedSum {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx512f() {
-                // SAFETY: the processor has AVX-512F (`dispatch` checked).
-                return unsafe { self.sum_avx512(point, normal) };
-            }
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch` checked).
-                return unsafe { self.sum_avx2(point, normal) };
-            }
-        }
-        self.sum_lanes(point, normal)
-    }
-
-    /// [`sum`](Self::sum) compiled for AVX-512 (a vector holds 8 `f64` or
-    /// 16 `f32` lanes). Rust never fuses a multiply and an add, so the
+    /// Compiled for AVX-512F or AVX2 where the processor has them
+    /// ([`dispatch`](crate::dispatch); a vector then holds 8 or 4 `f64`, 16
+    /// or 8 `f32` lanes). Rust never fuses a multiply and an add, so the
     /// results are the same bits.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    fn sum_avx512(&self, point: DVec3, normal: DVec3) -> PackedSum {
-        self.sum_lanes(point, normal)
+    pub(crate) fn sum(&self, point: DVec3, normal: DVec3) -> PackedSum {
+        crate::dispatch::with_avx512f_or_avx2(
+            #[inline(always)]
+            || self.sum_lanes(point, normal),
+        )
     }
 
-    /// [`sum`](Self::sum) compiled for AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn sum_avx2(&self, point: DVec3, normal: DVec3) -> PackedSum {
-        self.sum_lanes(point, normal)
-    }
-
-    /// The sum itself, inlined into each of the above. (No closures here:
-    /// a closure is not compiled for the caller's target features.)
+    /// The sum itself, inlined into each compiled copy of
+    /// [`sum`](Self::sum). (No closures inside: one would be compiled out
+    /// of line, without the copy's target features.)
     #[inline(always)]
     fn sum_lanes(&self, point: DVec3, normal: DVec3) -> PackedSum {
         let Some(frame) = self.frame else {

@@ -238,9 +238,8 @@ impl Moments {
     /// Adds one block's chunks to the accumulators of the sums: from 0 if
     /// `first`, else from `carry`; into `carry` unless `last`, when their
     /// lanes' sums go into `self.m` and `self.abs`.
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
+    /// The copy written with AVX2 and FMA instructions where the processor
+    /// has them ([`dispatch`](crate::dispatch)).
     #[inline(always)]
     fn sum_block(
         &mut self,
@@ -249,15 +248,27 @@ impl Moments {
         first: bool,
         last: bool,
     ) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2_fma() {
-                // SAFETY: the processor has AVX2 and FMA
-                // (`dispatch::avx2_fma` checked).
-                unsafe { self.sum_block_avx2(terms, carry, first, last) };
-                return;
-            }
-        }
+        crate::dispatch::copy_or!(
+            avx2_fma,
+            Self::sum_block_avx2,
+            Self::sum_block_baseline,
+            self,
+            terms,
+            carry,
+            first,
+            last
+        );
+    }
+
+    /// [`sum_block`](Self::sum_block)'s baseline copy.
+    #[inline(always)]
+    fn sum_block_baseline(
+        &mut self,
+        terms: &[ChunkTerms],
+        carry: &mut [Accumulator],
+        first: bool,
+        last: bool,
+    ) {
         for start in (0..SUMS).step_by(GROUP) {
             let mut acc = [[[0.0; LIGHT_LANES]; 3]; GROUP];
             if !first {

@@ -69,19 +69,17 @@ impl Grid {
         out
     }
 
-    // Calling the AVX2 copy is one of the crate's unsafe blocks (see
-    // `dispatch`).
-    #[allow(unsafe_code)]
+    /// The codes of `lights` into `out`: four at a time with AVX2
+    /// instructions where the processor has them
+    /// ([`dispatch`](crate::dispatch)).
     fn fill_codes(&self, lights: &[crate::PointLight], out: &mut [u64]) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if crate::dispatch::avx2() {
-                // SAFETY: the processor has AVX2 (`dispatch::avx2` checked).
-                unsafe { self.fill_codes_avx2(lights, out) };
-                return;
-            }
-        }
-        self.fill_codes_body(lights, out);
+        crate::dispatch::avx2_or!(
+            Self::fill_codes_avx2,
+            Self::fill_codes_body,
+            self,
+            lights,
+            out
+        );
     }
 
     /// [`fill_codes_body`](Self::fill_codes_body) four lights at a time,

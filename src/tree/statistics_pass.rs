@@ -288,9 +288,6 @@ impl StatisticsScratch {
 
 /// Fills the statistics of the subtree of `levels` (see
 /// [`fill_statistics`]); returns its root's sums and moments.
-// Calling the AVX2 copy is one of the crate's unsafe blocks (see
-// `dispatch`).
-#[allow(unsafe_code)]
 fn fill_subtree<'s>(
     levels: &mut Levels<'_>,
     lights: &[PointLight],
@@ -308,16 +305,20 @@ fn fill_subtree<'s>(
         children,
         leaf,
     } = scratch;
-    #[cfg(target_arch = "x86_64")]
-    {
-        if crate::dispatch::avx2_fma() {
-            // SAFETY: the processor has AVX2 and FMA (`dispatch::avx2_fma`
-            // checked).
-            let sums = unsafe { fill_node_avx2(levels, lights, 0, root, out, children, leaf) };
-            return (sums, out);
-        }
-    }
-    let sums = fill_node_baseline(levels, lights, 0, root, out, children, leaf);
+    // The pass recurses, so each copy is a function of its own that calls
+    // itself (a closure, as `dispatch::with_avx2` takes, cannot).
+    let sums = crate::dispatch::copy_or!(
+        avx2_fma,
+        fill_node_avx2,
+        fill_node_baseline,
+        levels,
+        lights,
+        0,
+        root,
+        out,
+        children,
+        leaf
+    );
     (sums, out)
 }
 
