@@ -390,7 +390,9 @@ impl ErrorList {
     ///
     /// The waiting entries are summed in four interleaved plain sums, added
     /// pairwise: independent additions rather than one compensated chain,
-    /// which cost about a twelfth of a shading point at 10^4 lights. A sum
+    /// whose steps each wait on the one before: a share of a shading point
+    /// worth saving (`docs/tuning.md`; `cargo run --release -p
+    /// manylights-report -- scaling` measures it). A sum
     /// of `n` terms in any order is within `(n - 1) eps` of the exact sum
     /// of their magnitudes (Higham, *Accuracy and Stability of Numerical
     /// Algorithms*, 2002, section 4.2; `eps = f64::EPSILON / 2`), so

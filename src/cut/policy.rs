@@ -41,9 +41,9 @@ pub(crate) const NEAR_NODE_REACH: f64 = 512.0;
 pub(crate) const SMALL_SCENE_LIGHTS: u32 = 256;
 
 /// [`SMALL_SCENE_LIGHTS`] where the lights are summed coarsely (relative
-/// targets of at least [`COARSE_TARGET_MIN`]; `Lambert` sums about a
-/// light a nanosecond from lights kept side by side): the whole sum is
-/// the cheaper up to about a thousand lights at every target.
+/// targets of at least [`COARSE_TARGET_MIN`], in one call from lights kept
+/// side by side): the whole sum then costs less than the cut up to about
+/// this many lights at every target.
 pub(crate) const SMALL_SCENE_LIGHTS_COARSE: u32 = 1024;
 
 /// Scenes summed whole wherever the point lies, once known visible: the
@@ -92,7 +92,10 @@ pub(crate) const SMALL_NODE_LIGHTS: u32 = 16;
 pub(crate) const ASK_MAX: usize = 32;
 
 /// Entries a point sums over a shared cut in the time of one shared node
-/// bound (about 50 instructions an entry, 1,500 a bound).
+/// bound: the unit in which a group's shared cut and its points' sums are
+/// weighed against the points shaded alone. Instruction counts of the two
+/// set it (`docs/tuning.md`); `cargo run --release -p manylights-report --
+/// batch` measures the batch call.
 pub(crate) const ENTRIES_PER_BOUND: u64 = 32;
 
 /// Most entries in a shared cut: the points' lane sums are certified up to

@@ -186,15 +186,16 @@ impl Threshold {
     /// list there is no blending, and when blending would exceed it the
     /// unblended result is returned, as it is should the certified
     /// re-summation miss the target. `band` must be finite and greater than
-    /// 1 ([`ShadeError::InvalidBand`] otherwise). Measured on a street-light
-    /// city along a scanline of 100,000 points (`cargo run --release
-    /// --example seams`), band 2 makes the largest jump of the relative
-    /// error 120 to 700 times smaller at thresholds of 1% to 20%, with about
-    /// 0.65 times the evaluations (the nested intervals meet the target
-    /// sooner) and about twice the time; on scanlines whose tangent plane
-    /// cuts a sphere of lights, 50 to 1,350 times smaller at 100,000 points,
-    /// and every remaining jump shrinks about tenfold when the points are
-    /// ten times closer (smooth variation, not seams).
+    /// 1 ([`ShadeError::InvalidBand`] otherwise).
+    ///
+    /// With band 2 the jumps of the relative error that remain shrink in
+    /// proportion to the spacing of the points (the error's smooth
+    /// variation, not seams); the cut needs fewer evaluations than without
+    /// interpolation (the nested intervals meet the target sooner) but each
+    /// point takes longer. `cargo run --release --example seams` measures
+    /// the jumps, evaluations and time along scanlines with and without
+    /// interpolation; the repository's `docs/tuning.md` records the
+    /// measurement behind band 2.
     #[must_use]
     pub const fn with_interpolation(mut self, band: f64) -> Self {
         self.band = Some(band);

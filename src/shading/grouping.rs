@@ -15,7 +15,9 @@ use super::Query;
 use crate::geometry::Aabb;
 use crate::tree::morton;
 
-/// Most points in a group.
+/// Most points in a group: larger cells share each cut among more points
+/// but cover more ground, so their cuts serve their points less closely
+/// (`docs/tuning.md` has the sizes compared).
 pub(super) const GROUP_POINTS: usize = 128;
 /// A point joins the group being formed only if its normal is within this
 /// distance (`|n - n_first|`, about 29 degrees) of the group's first normal.
@@ -32,10 +34,9 @@ pub(super) struct Groups {
     ///
     /// A cell is compact, as a run of the curve need not be: where the
     /// curve jumps between far cells, a run takes in both sides, and its
-    /// cut must serve the whole span. At 10^6 lights, certified 1%, cells
-    /// of at most 64 points took about 15% less time than runs of 64, and
-    /// cells of at most 128 about 8% less again (256 and 512: no further
-    /// gain).
+    /// cut must serve the whole span. `cargo run --release -p
+    /// manylights-report -- batch` measures the call; `docs/tuning.md`
+    /// records how cells compared with runs and which sizes were tried.
     pub(super) runs: Vec<Range<usize>>,
 }
 

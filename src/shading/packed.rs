@@ -243,8 +243,9 @@ impl<T: Real, const N: usize> Blocks<T, N> {
     /// terms that vanish exactly are skipped: the same bits). Each lane adds
     /// its entries in order, [`FLUSH`] blocks at a time into `f64`, and the
     /// lanes are added last.
-    // Index loops: iterator chains here cost about 8% of a batch call at
-    // 10^6 lights (measured).
+    // Index loops: iterator chains here made the batch call slower
+    // (`docs/tuning.md`; `cargo run --release -p manylights-report --
+    // batch` measures it).
     #[allow(clippy::needless_range_loop)]
     #[inline(always)]
     fn sum(&self, p: [T; 3], n: [T; 3]) -> ([f64; 3], f64) {

@@ -122,11 +122,14 @@ impl TreeBuilder {
     /// allocator takes it from the system, as it does for the arrays of
     /// millions of lights; a rebuild writes over the memory the tree holds,
     /// growing it only where the new tree is larger (the build's own
-    /// working arrays are still taken afresh). On the street city, one
-    /// thread, a rebuild took 0.8 to 0.9 times a fresh build's time at 10^6
-    /// and 10^7 lights, and about the same at 10^5 and below, where the
-    /// allocator hands back memory it has already mapped. Lights that only move, in
-    /// the same number, are cheaper still to [`refit`](LightTree::refit).
+    /// working arrays are still taken afresh). So a rebuild gains where the
+    /// allocator would map a fresh build's arrays afresh, for large trees,
+    /// and costs about what a build does where it hands back memory it has
+    /// already mapped. The build table of `cargo run --release -p
+    /// manylights-report -- bounds` times both and counts their page
+    /// faults (the repository's `docs/tuning.md` records a measurement).
+    /// Lights that only move, in the same number, are cheaper still to
+    /// [`refit`](LightTree::refit).
     ///
     /// # Errors
     /// As [`build`](Self::build); the tree is then left as it was (the

@@ -62,8 +62,9 @@ const BOUND_LIGHTS: usize = 4;
 /// The same box as light by light but perhaps for the sign of a zero
 /// bound (`-0` and `0` compare equal, and which of them a minimum keeps
 /// depends on the order), which the Morton grid over the box does not
-/// see. Measured with callgrind (the street city, 10^6 lights): 11
-/// instructions a light, against 44 light by light.
+/// see. Branch-free groups take a fraction of the instructions of light
+/// by light (`docs/tuning.md` records the counts); `cargo run --release -p
+/// manylights-report -- bounds` times the build it is part of.
 fn bound_part(lights: &[PointLight]) -> (Aabb, bool) {
     const VALUES: usize = 6 * BOUND_LIGHTS;
     // Per value of a group, the ends of its range.

@@ -125,12 +125,12 @@ pub(crate) struct NodeGroups {
     at: Vec<u32>,
 }
 
-/// Blocks are filled on the build's pool from this many on: a block takes
-/// about a tenth of a microsecond (its lanes' statistics gathered and
-/// rounded), so a few thousand of them outweigh waking the pool's threads
-/// (up to a millisecond or more on a busy machine); the street city has
-/// 2,000 blocks at 10^5 lights and 22,000 at 10^6. Lower in the tests, so
-/// that their parallel builds take this path.
+/// Blocks are filled on the build's pool from this many on: a block is
+/// cheap (its lanes' statistics gathered and rounded), and only some
+/// thousands of them outweigh waking the pool's threads, which can be slow
+/// on a busy machine. `cargo run --release -p manylights-report -- bounds`
+/// times builds on the pool; `docs/tuning.md` has the figures behind the
+/// value. Lower in the tests, so that their parallel builds take this path.
 const PARALLEL_BLOCKS: usize = if cfg!(test) { 64 } else { 8192 };
 
 /// No block: a leaf's entry in the table.

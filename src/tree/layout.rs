@@ -187,27 +187,27 @@ impl LightTree {
 /// Trees of fewer nodes are not prefetched: their nodes (under 2,048 of
 /// 232 bytes, at most 475 KB) mostly stay in a second-level cache from one
 /// shading point to the next, where a prefetch only costs its
-/// instructions. Measured on the street city at a certified 1%: 0.97 times
-/// the time per point at 10^4 lights (1,113 nodes), the same within noise
-/// at 10^5.
+/// instructions. The alternating passes of `cargo run --release -p
+/// manylights-report -- scaling` (each point with the caches cold) measure
+/// its effect; `docs/tuning.md` records the measurement.
 const PREFETCH_MIN_NODES: usize = 2048;
 
 /// The first bytes of a [`Node`], which hold what the cut reads of a node
 /// entering it (intensity, radius, counts, ranges, the moments' rounding
 /// bound, and the centroid, which tells whether a near node is summed
-/// whole). Until the centroid was among them a cold child's record often
-/// missed the cache a second time; with it, on the street city of 10^6
-/// lights at a certified 1%, each point after an exact sum over the scene
-/// took 0.99x the time (median of 16 alternating pairs of runs).
+/// whole). A field the cut reads past these bytes makes a cold child's
+/// record miss the cache a second time, as the centroid did before it was
+/// among them. The alternating passes of `cargo run --release -p
+/// manylights-report -- scaling` at 10^6 lights measure the effect;
+/// `docs/tuning.md` records the measurement.
 const HOT_NODE_BYTES: usize = core::mem::offset_of!(Node, weight);
 
 /// Cache lines of a run of lights prefetched at most per call: the 64
 /// lights a coarse sum takes at most (1,536 bytes) wherever they start.
-/// Measured on the street city of 10^6 lights at a certified 1%, each
-/// point after 24 MB of other reads (caches cold), against no prefetch of
-/// the runs: 0.95x the time per point (median of 15 alternating pairs of
-/// runs), the same within noise with the tree warm in the caches and at
-/// 10^5 lights.
+/// It pays where the lights are cold in the caches, as a renderer's other
+/// work leaves them: the alternating passes of `cargo run --release -p
+/// manylights-report -- scaling` at 10^6 lights measure it against no
+/// prefetch; `docs/tuning.md` records the measurement.
 const PREFETCH_RUN_LINES: usize = 25;
 
 #[cfg(test)]

@@ -19,11 +19,11 @@
 /// each axis in turn, and a half or a quarter of the cell (or a pair of
 /// neighbouring sub-cells) with few enough lights is not halved further.
 /// So a node splits into a few well-filled leaves instead of up to eight
-/// small ones: on the street city the leaves average 21 to 23 lights at
-/// 10^4 to 10^7 lights against 12 to 21 without this, and the tree has
-/// 0.058 to 0.075 nodes per light instead of 0.062 to 0.12, which makes
-/// the build faster and the tree smaller. A child that holds more than
-/// `max_leaf_lights` lights is always a single sub-cell.
+/// small ones: fewer nodes, which makes the build faster and the tree
+/// smaller (the build table of `cargo run --release -p manylights-report
+/// -- bounds` prints nodes and memory per light; the repository's
+/// `docs/tuning.md` records the effect on the street city). A child that
+/// holds more than `max_leaf_lights` lights is always a single sub-cell.
 ///
 /// A node becomes a leaf when it holds at most
 /// [`max_leaf_lights`](Self::max_leaf_lights) lights, when it reaches
@@ -70,13 +70,13 @@ impl TreeBuilder {
     /// is summed light by light when it enters the cut, so without
     /// interpolation or occluders no leaf is ever bounded, and the same
     /// cut costs the same evaluations with 32 as with 16 lights per leaf.
-    /// Smaller leaves mean more nodes to build and store for nothing. Leaves
-    /// of at most 16 lights measured against 32 on the street city at 10^6
-    /// lights (one core): 0.13 nodes per light instead of 0.069, 86 bytes
-    /// per light instead of 59, a build about 1.4x slower. Smaller leaves
-    /// can still pay where the host's visibility classifications are cheap
-    /// and its shadow rays dear: they classify more nodes and trace fewer
-    /// rays.
+    /// Smaller leaves mean more nodes to build and store for nothing, and a
+    /// slower build. Smaller leaves can still pay where the host's
+    /// visibility classifications are cheap and its shadow rays dear: they
+    /// classify more nodes and trace fewer rays. The build table of `cargo run --release -p
+    /// manylights-report -- bounds` prints a build's time, memory and nodes
+    /// per light; the repository's `docs/tuning.md` records the comparison
+    /// of leaves of 16 and 32 lights.
     pub const fn new() -> Self {
         Self {
             max_leaf_lights: 32,

@@ -12,10 +12,9 @@ pub(crate) struct Pool {
 
 /// Builds of fewer lights stay on the calling thread: below this the
 /// pool's start-up costs more than it saves (lowered in the unit tests, as
-/// [`CHEAP_PARALLEL_MIN`]). On a shared two-core machine, paired
-/// alternating runs of the street city's build on the pool took 0.95x the
-/// time at 10^4 lights and 0.94x at 2 * 10^4 with this threshold against
-/// `2^15` (which built them on one thread).
+/// [`CHEAP_PARALLEL_MIN`]). The build table of `cargo run --release -p
+/// manylights-report -- bounds` times builds on one thread and on the
+/// pool; `docs/tuning.md` records the comparison that set it.
 #[cfg(feature = "rayon")]
 const PARALLEL_MIN_LIGHTS: usize = if cfg!(test) { 1 << 10 } else { 1 << 13 };
 

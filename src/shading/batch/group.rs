@@ -22,7 +22,10 @@ const GROUP_MIN_POINTS: usize = 4;
 /// shaded point by point: this share of what a point shaded on its own
 /// costs (node bounds, single lights and host queries), as measured on the
 /// points shaded alone so far in the chunk of groups; at least
-/// [`MIN_BUDGET_PER_POINT`].
+/// [`MIN_BUDGET_PER_POINT`]. Less lets through only the groups that share
+/// best and shades more points alone; more lets costly cuts through.
+/// `cargo run --release -p manylights-report -- batch` measures the call;
+/// `docs/tuning.md` records the shares compared.
 const BUDGET_SHARE: f64 = 0.6;
 /// See [`BUDGET_SHARE`].
 const MIN_BUDGET_PER_POINT: u64 = 32;

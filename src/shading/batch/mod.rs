@@ -51,7 +51,10 @@ impl core::ops::AddAssign for BatchStats {
 /// threads take, one at a time as each finishes its last, so they are
 /// small: a few groups cost far more than the rest, and a chunk should not
 /// tie them to others. One group a chunk: each group's first cut then
-/// starts from the least budget.
+/// starts from the least budget, which costs a little on one thread and
+/// shares a frame out evenly over threads (`docs/tuning.md`; `cargo run
+/// --release -p manylights-report -- batch`, pinned and unpinned,
+/// measures both).
 const CHUNK_RUNS: usize = 1;
 
 /// The points of a group: indices into the queries, the points of other

@@ -107,6 +107,9 @@ impl<S: Shader> Shading<'_, S> {
             }
             work();
         });
+        // The results are put in place here, after the workers, rather than
+        // written by each worker into `results` through a shared pointer: no
+        // unsafe block here, for a small cost (`docs/tuning.md`).
         let mut out = Outcome::default();
         for worker in shaded.into_inner().unwrap_or_default() {
             let (written, mut outcome) = worker?;
@@ -124,7 +127,9 @@ impl<S: Shader> Shading<'_, S> {
 /// The chunks of `batch` in the order the workers take them: those whose
 /// points spread widest first. Those are the costly ones (a group that
 /// spans blocks near the horizon is shaded point by point), and left for
-/// the end one would keep the other threads waiting.
+/// the end one would keep the other threads waiting. `cargo run --release
+/// -p manylights-report -- batch`, unpinned, prints the call's speed-up
+/// over one thread; `docs/tuning.md` records it against Morton order.
 fn widest_first<M>(batch: &Batch<'_, M>) -> Vec<usize> {
     let mut queue: Vec<(f64, usize)> = (0..batch.chunks())
         .map(|k| {
