@@ -686,7 +686,13 @@ fn expand<S: Shader, V: Visibility>(
         let outer = std::mem::take(&mut cut.region.settled);
         let magnitude = &mut nesting.fixed_magnitude;
         cut.refine(node as usize, visible, 1.0, &mut |mut e: Entry| {
-            e.key = e.key.min(key);
+            // Children's priorities are capped at their parent's, but a
+            // child with no finite bound (its ball reaches the point) is
+            // refined at every level its parent is: its interval is the
+            // whole line, and a weight below 1 would mix that in.
+            if e.class != Class::Unbounded {
+                e.key = e.key.min(key);
+            }
             if ramp.alpha(e.key) > 0.0 {
                 items.push(item(&e, parent, frame));
             } else {

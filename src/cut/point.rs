@@ -550,7 +550,10 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
     cut.enter_root(list, interpolating.then_some(&mut *nesting));
     let outcome: Outcome = cut.run(list, threshold, interpolating.then_some(&mut *nesting));
     let unbounded = list.has_unbounded();
-    let (mut radiance, mut bound) = if interpolating && !unbounded {
+    // With nothing left waiting the cut is the exact sum of what it
+    // settled, as without interpolation: no nesting, and no rounding
+    // allowance of the nested intervals (which would exceed a zero target).
+    let (mut radiance, mut bound) = if interpolating && !unbounded && list.len() > 0 {
         // Each refined node's interval intersected with its children's.
         outcome.confirmed.unwrap_or_else(|| nesting.fold(list))
     } else {
@@ -566,6 +569,7 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
         // largest single error cannot grow.
         && let Some((r, e)) =
             interpolate::interpolate(&mut cut, scratch, threshold, outcome.last_step, radiance, bound)
+        && e.is_finite()
         && threshold.met(r, e, 0.0)
     {
         (radiance, bound) = (r, e);

@@ -181,3 +181,66 @@ fn bad_bands_are_refused() {
         ));
     }
 }
+
+/// Regression: with interpolation and a target at or below the rounding
+/// floor (zero, relative `1e-18`, absolute `1e-300`), a cut refined down to
+/// its lights reported `ThresholdMet` with the nested fold's rounding
+/// allowance as its bound (about `1e-14`), above the target. A cut with
+/// nothing left to refine is the exact sum of its lights, as without
+/// interpolation: bound 0, which meets every target.
+#[test]
+fn targets_below_the_rounding_floor_are_met_with_interpolation() {
+    let lights = [
+        PointLight::new(Vec3::new(0.3, 0.1, 1.0), Vec3::ONE),
+        PointLight::new(Vec3::new(-0.7, 0.2, 0.9), Vec3::ONE),
+        PointLight::new(Vec3::new(0.1, -0.4, 2.0), Vec3::ONE),
+    ];
+    let tree = LightTree::build(&lights).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::new(0.8, 0.6, 0.4)));
+    let (p, n) = (Vec3::ZERO, Vec3::new(0.1, 0.2, 1.0));
+    let exact = s.exact(p, n).unwrap();
+    for t in [
+        Threshold::zero(),
+        Threshold::relative(0.0),
+        Threshold::relative(1e-18),
+        Threshold::absolute(1e-300),
+    ] {
+        for band in [1.5, 2.0, 8.0] {
+            let r = s.shade(p, n, t.with_interpolation(band)).unwrap();
+            assert_eq!(r.stop, manylights::Stop::ThresholdMet, "{t:?}");
+            assert_eq!(r.error_bound, DVec3::ZERO, "{t:?} band {band}: {r:?}");
+            assert!(r.certifies(exact), "{r:?} against {exact}");
+        }
+    }
+}
+
+/// Regression: Lightcuts' per-node target with interpolation, at a point
+/// on one of the lights of a dense slab, returned radiance 0 with an
+/// infinite bound and `ThresholdMet`: the blend capped the priority of a
+/// child whose ball reaches the point at its parent's, mixing its whole
+/// line into the sum. Such a child is now refined at every level its parent
+/// is; every result has a finite bound and holds it.
+#[test]
+fn per_node_interpolation_at_a_light_has_a_finite_bound() {
+    let mut state = 12345u64;
+    let mut u = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let lights: Vec<PointLight> = (0..10_000)
+        .map(|_| PointLight::new(Vec3::new(u(), u(), 0.3 * u()), Vec3::ONE))
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::splat(0.5)));
+    for band in [1.5, 2.0] {
+        let t = Threshold::per_node(0.3).with_interpolation(band);
+        for light in lights.iter().step_by(5) {
+            let r = s.shade(light.position, Vec3::Z, t).unwrap();
+            let exact = s.exact(light.position, Vec3::Z).unwrap();
+            assert!(r.error_bound.is_finite(), "{r:?} at {}", light.position);
+            assert!(r.certifies(exact), "{r:?} against {exact}");
+        }
+    }
+}
