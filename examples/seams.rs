@@ -8,7 +8,11 @@
 //! panels in orbit whose tangent plane cuts through it, so that many nodes
 //! straddle the plane; there each scanline is sampled at two densities, so
 //! that real jumps (which do not shrink when the points are 10x closer) are
-//! told apart from the error's smooth variation (which does). Last, renders
+//! told apart from the error's smooth variation (which does). Then a
+//! scanline that crosses just inside a shell of lights, where the balls of
+//! ever smaller nodes reach the points (such a node has no finite bound
+//! and must be refined), shaded point by point and by the batch call, with
+//! the evaluations each costs. Last, renders
 //! the paper's pair (an image and its enhanced-contrast difference against
 //! the exact sum) from above, with and without interpolation.
 //!
@@ -22,7 +26,7 @@ use std::error::Error;
 use std::path::Path;
 
 use glam::{DVec3, Vec3};
-use manylights::{Lambert, LightTree, Shading, Threshold};
+use manylights::{Lambert, LightTree, Query, ShadeResult, Shading, Threshold, Unoccluded};
 use manylights_report::compare::timed;
 use manylights_report::image::{exposure, write_difference_linear, write_radiance};
 use manylights_report::scenes::{GRID_BLOCK, SPHERE_RADIUS, lamp_grid, sphere_lights};
@@ -55,6 +59,25 @@ const ALBEDO: f32 = 0.7;
 const SPHERE_LIGHTS: usize = 20_000;
 /// Points along each horizon scanline: the coarse and the dense sampling.
 const HORIZON_POINTS: [usize; 2] = [10_000, 100_000];
+/// Lights on the sphere of the shell scanline.
+const SHELL_LIGHTS: usize = 100_000;
+/// The shell scanline: a chord 0.99 radii from the sphere's centre, which
+/// crosses just inside the shell and out again, and its points' normal,
+/// whose tangent plane cuts the sphere.
+const SHELL: (Vec3, Vec3, Vec3) = (
+    Vec3::new(
+        -0.25 * SPHERE_RADIUS,
+        0.05 * SPHERE_RADIUS,
+        0.99 * SPHERE_RADIUS,
+    ),
+    Vec3::new(
+        0.25 * SPHERE_RADIUS,
+        0.05 * SPHERE_RADIUS,
+        0.99 * SPHERE_RADIUS,
+    ),
+    Vec3::new(0.6, 0.3, 1.0),
+);
+
 /// The horizon scanlines: name, ends, normal. Both run 300 units above the
 /// sphere's centre across its width; the plane through a point sweeps
 /// across the sphere with the point.
@@ -150,6 +173,78 @@ fn horizon(band: f64) -> Result<(), Box<dyn Error>> {
     Ok(())
 }
 
+/// The points facing `normal` shaded by one batch call at `threshold` (on
+/// one thread, the points in scanline order).
+fn shade_batch(
+    tree: &LightTree,
+    points: &[Vec3],
+    normal: Vec3,
+    threshold: Threshold,
+) -> Vec<ShadeResult> {
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(ALBEDO)));
+    let queries: Vec<Query> = points
+        .iter()
+        .map(|&p| Query::new(p, normal))
+        .collect::<Result<_, _>>()
+        .expect("the scanline's points and normals are valid");
+    let mut results = vec![ShadeResult::default(); queries.len()];
+    shading
+        .shade_batch(&queries, threshold, Unoccluded, &mut results)
+        .expect("as many results as queries");
+    results
+}
+
+/// The shell table: per density, threshold and way of shading (point by
+/// point, or by the batch call), the largest jump without and with
+/// interpolation and the evaluations per point of each.
+fn shell(band: f64) -> Result<(), Box<dyn Error>> {
+    let tree = LightTree::build(&sphere_lights(SHELL_LIGHTS, SEED))?;
+    let (a, b, normal) = SHELL;
+    let normal = normal.normalize();
+    println!(
+        "\nShell: {} lights over a sphere of radius {SPHERE_RADIUS}, points along a chord {} \
+         units from its centre (crossing just inside the shell); largest jump of the relative \
+         error, and evaluations per point\n",
+        tree.len(),
+        0.99 * SPHERE_RADIUS
+    );
+    println!(
+        "| threshold | points | call | interpolation off | on | smaller by | evaluations off | on |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(ALBEDO)));
+    for count in HORIZON_POINTS {
+        let points = along(a, b, count);
+        let exact = shade_facing(&tree, &points, normal, None);
+        for t in THRESHOLDS {
+            let discrete = Threshold::relative(t);
+            for call in ["shade", "shade_batch"] {
+                let [off, on] = [discrete, discrete.with_interpolation(band)].map(|th| {
+                    let results: Vec<ShadeResult> = if call == "shade" {
+                        let shade = |&p: &Vec3| shading.shade(p, normal, th).expect("valid point");
+                        points.iter().map(shade).collect()
+                    } else {
+                        shade_batch(&tree, &points, normal, th)
+                    };
+                    let radiance: Vec<DVec3> = results.iter().map(|r| r.radiance).collect();
+                    let cost = results.iter().map(|r| f64::from(r.cost())).sum::<f64>();
+                    (largest_jump(&radiance, &exact), cost / count as f64)
+                });
+                println!(
+                    "| {:.0}% | {count} | {call} | {:.2e} | {:.2e} | {:.1}x | {:.0} | {:.0} |",
+                    t * 100.0,
+                    off.0,
+                    on.0,
+                    off.0 / on.0,
+                    off.1,
+                    on.1
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// One row of the table: the largest jump of the relative error between
 /// neighbours, the largest relative error, the mean cost and the time per
 /// point (one thread).
@@ -212,6 +307,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         );
     }
     horizon(band)?;
+    shell(band)?;
 
     // The paper's pair, seen from above over two blocks.
     let side = IMAGE_SIZE as usize;

@@ -372,7 +372,8 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
             return;
         };
         let parent = n.taken(&top, slot);
-        let frame = n.refined(&top, parent);
+        let near = super::interpolate::near(&self.tree.nodes[top.node as usize], n.point);
+        let frame = n.refined(&top, parent, near);
         R::nested(self, n, frame, |cut, n| {
             cut.refine(top.node as usize, visible, 1.0, &mut |mut e: Entry| {
                 e.key = e.key.min(top.key);
@@ -380,7 +381,12 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
                 n.pushed(&e, frame);
             });
         });
+        // Both running sums changed: the parent's lost `top` and the new
+        // frame gained its children. Where the frame's interval comes out
+        // as it started (a node whose children all settled to 0),
+        // finishing it stops there, so the parent is finished too.
         n.finish(frame);
+        n.finish(parent);
     }
 
     /// Asks the host about `top`, just taken from slot `slot` of the list,

@@ -2,13 +2,17 @@
 //! cut's last nodes blended with their children so the estimate is
 //! continuous in the shading point.
 //!
-//! Three things make the blend a continuous function of the shading point:
+//! Four things make the blend a continuous function of the shading point:
 //!
 //! * **Weights from priorities.** Every node of the cut, refined by the
 //!   list or not, is given a refinement weight from its priority and the
 //!   level (see [`Ramp`]); with interpolation a node's priority is capped
 //!   at its parent's, so weights never grow down a path, and a node whose
 //!   weight is 0 has no refined descendants.
+//! * **Weights that reach 1 before a bound ends.** A node whose ball comes
+//!   to reach the point has no finite bound and must be refined; its
+//!   weight has a floor from its clearance (see [`near`]) that reaches 1
+//!   there, so the blend does not switch where the ball reaches the point.
 //! * **Nested intervals.** A node's certified interval `A` and the sum `C`
 //!   of its children's both hold the node's exact value, so their
 //!   intersection does too; a node refined with weight `alpha` counts for
@@ -31,8 +35,10 @@ use super::engine::{Cut, Region};
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::point::{Point, PointScratch, reported_bound};
 use super::threshold::{Target, Threshold};
+use crate::geometry::Cone;
 use crate::numeric::CompensatedSum;
 use crate::shader::Shader;
+use crate::tree::Node;
 use crate::visibility::Visibility;
 
 /// No parent: a frame of the root, or an item of a waiting entry.
@@ -85,6 +91,8 @@ impl Running {
 /// intersect each refined node's interval with its children's.
 #[derive(Debug, Default)]
 pub(crate) struct Nesting {
+    /// The shading point, as the nodes' cones see it (for [`near`]).
+    pub(crate) point: DVec3,
     /// The nodes the list refined, in the order it refined them (a parent
     /// before its children).
     frames: Vec<Frame>,
@@ -117,6 +125,8 @@ struct Frame {
     /// to refine whatever its error (over the maximal contribution), which
     /// the blend never un-refines.
     key: f64,
+    /// Its weight's floor from its clearance (see [`near`]).
+    near: f64,
     /// Its certified interval when it was refined.
     own: Interval,
     /// What its refinement settled exactly (lights, dark or error-free
@@ -191,9 +201,10 @@ impl Nesting {
     /// returns the new frame, which contributes nothing until
     /// [`finish`](Self::finish)ed.
     #[inline]
-    pub(crate) fn refined(&mut self, e: &Entry, parent: u32) -> u32 {
+    pub(crate) fn refined(&mut self, e: &Entry, parent: u32, near: f64) -> u32 {
         self.frames.push(Frame {
             parent,
+            near,
             key: if e.class == Class::Error {
                 e.key
             } else {
@@ -334,7 +345,7 @@ impl Nesting {
         for f in (0..self.frames.len()).rev() {
             let fr = &self.frames[f];
             let parent = fr.parent;
-            let alpha = ramp.alpha(fr.key);
+            let alpha = ramp.weight(fr.key, fr.near);
             let (lo, hi) = nest(
                 alpha,
                 bounds(fr.own),
@@ -415,6 +426,8 @@ pub(crate) struct Item {
     frame: u32,
     /// Its priority, the cap of its children's.
     key: f64,
+    /// Its weight's floor from its clearance (see [`near`]).
+    near: f64,
     visible: bool,
     lo: DVec3,
     hi: DVec3,
@@ -449,6 +462,13 @@ impl Ramp {
         }
     }
 
+    /// The weight of a node of priority `key` whose clearance sets the
+    /// floor `near` (see [`near`]).
+    #[inline]
+    pub(crate) fn weight(&self, key: f64, near: f64) -> f64 {
+        self.alpha(key).max(near)
+    }
+
     /// The weight of a node of priority `key` (infinite for a node with no
     /// finite bound, always refined).
     #[inline]
@@ -460,6 +480,35 @@ impl Ramp {
         }
     }
 }
+
+/// The floor of a node's weight from its clearance: 1 where its ball
+/// reaches the point (where it has no finite bound and must be refined),
+/// falling linearly in the clearance `q = (D - R) / D` (`D` the distance
+/// from the point to the node's centre, `R` its radius) to 0 at
+/// [`NEAR_CLEARANCE`] (`D = 1.5 R`), and 0 for a node that is a single
+/// point. A node whose ball nears the point has a bound that grows without
+/// limit; the floor makes its weight reach 1 before its bound does, so
+/// that the blend changes continuously where the ball comes to reach the
+/// point, as it does where a priority crosses the level.
+#[inline]
+pub(crate) fn near(node: &Node, point: DVec3) -> f64 {
+    let radius = f64::from(node.radius);
+    if radius == 0.0 {
+        return 0.0;
+    }
+    let distance = (node.centroid.as_dvec3() - point).length();
+    // `Cone::new` refuses the ball at a clearance of `MIN_CLEARANCE` or
+    // less: the floor is 1 there.
+    let clearance = (distance - radius) / distance - Cone::MIN_CLEARANCE;
+    if !(clearance > 0.0) {
+        return 1.0;
+    }
+    (1.0 - clearance / NEAR_CLEARANCE).clamp(0.0, 1.0)
+}
+
+/// The clearance `(D - R) / D` at and beyond which a node's weight has no
+/// floor (see [`near`]): `D = 1.5 R`.
+const NEAR_CLEARANCE: f64 = 1.0 / 3.0;
 
 /// The level at which the error list stopped, for the per-node target
 /// (whose excess does not depend on the blend) and the batch call's shared
@@ -660,10 +709,12 @@ fn expand<S: Shader, V: Visibility>(
     nesting.top_fixed_hi = nesting.top_settled;
     nesting.fixed_magnitude = DVec3::ZERO;
     items.clear();
+    let point = cut.region.surface.point;
     for (e, slot) in list.waiting() {
         let frame = nesting.parents[slot as usize];
-        if ramp.alpha(e.key) > 0.0 {
-            items.push(item(e, NO_PARENT, frame));
+        let near = near(&cut.tree.nodes[e.node as usize], point);
+        if ramp.weight(e.key, near) > 0.0 {
+            items.push(item(e, near, NO_PARENT, frame));
         } else {
             let (lo, hi) = bounds(interval(e));
             nesting.add_fixed(frame, lo, hi);
@@ -693,8 +744,9 @@ fn expand<S: Shader, V: Visibility>(
             if e.class != Class::Unbounded {
                 e.key = e.key.min(key);
             }
-            if ramp.alpha(e.key) > 0.0 {
-                items.push(item(&e, parent, frame));
+            let near = near(&tree.nodes[e.node as usize], point);
+            if ramp.weight(e.key, near) > 0.0 {
+                items.push(item(&e, near, parent, frame));
             } else {
                 let (lo, hi) = bounds(interval(&e));
                 let p = &mut items[parent as usize];
@@ -732,7 +784,7 @@ fn fold_at<const EXACT: bool>(
         let it = &items[i];
         let (parent, frame) = (it.parent, it.frame);
         let (lo, hi) = nest(
-            ramp.alpha(it.key),
+            ramp.weight(it.key, it.near),
             (it.lo, it.hi),
             &it.sum_lo,
             &it.sum_hi,
@@ -768,13 +820,14 @@ fn accumulate<const EXACT: bool>(
 
 /// An item for `e`.
 #[inline]
-fn item(e: &Entry, parent: u32, frame: u32) -> Item {
+fn item(e: &Entry, near: f64, parent: u32, frame: u32) -> Item {
     let (lo, hi) = bounds(interval(e));
     Item {
         node: e.node,
         parent,
         frame,
         key: e.key,
+        near,
         visible: e.seen == Seen::Visible,
         lo,
         hi,

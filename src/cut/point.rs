@@ -547,6 +547,7 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
     let mut cut = Cut::new(tree, shader, region, threshold, visibility);
     let interpolating = threshold.interpolation().is_some();
     let (list, nesting) = (&mut scratch.list, &mut scratch.nesting);
+    nesting.point = cut.region.surface.point;
     cut.enter_root(list, interpolating.then_some(&mut *nesting));
     let outcome: Outcome = cut.run(list, threshold, interpolating.then_some(&mut *nesting));
     let unbounded = list.has_unbounded();

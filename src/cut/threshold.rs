@@ -138,7 +138,10 @@ impl Threshold {
     /// refined, with priority `e` is given a refinement weight
     /// `alpha = clamp((e - tau/band) / (tau - tau/band), 0, 1)` (1 from
     /// `e >= tau` on; nodes the maximal contribution forced the list to
-    /// refine keep weight 1) and counts for `(1 - alpha) A + alpha (A ∩ C)`,
+    /// refine keep weight 1; a node whose ball nears the shading point
+    /// weighs at least `1 - q / (1/3)`, `q = (D - R) / D` its clearance, so
+    /// that its weight reaches 1 where its ball reaches the point and it has
+    /// no finite bound) and counts for `(1 - alpha) A + alpha (A ∩ C)`,
     /// with `A` its own certified interval and `C` the sum of its
     /// children's blended intervals, recursively. That interval holds the
     /// exact value (a mixture of two intervals that both hold it) and lies
@@ -182,7 +185,12 @@ impl Threshold {
     ///
     /// Cost: the nodes whose priorities lie within the band below the level
     /// are bounded once more, and the search re-sums the blended cut about
-    /// seven times. A budget caps the blend too: when it stops the error
+    /// seven times. In evaluations (node bounds and lights,
+    /// [`ShadeResult::cost`](crate::ShadeResult::cost)) the cut stays within twice the discrete cut's
+    /// and is usually below it, points inside clusters, shells and thin
+    /// layers of lights included (a property test checks the factor 2 on
+    /// such scenes); in time a point takes a few times longer, as the
+    /// blend's bounds are not taken in `f32` and the search re-sums. A budget caps the blend too: when it stops the error
     /// list there is no blending, and when blending would exceed it the
     /// unblended result is returned, as it is should the certified
     /// re-summation miss the target. `band` must be finite and greater than

@@ -109,12 +109,15 @@ impl<S: Shader> Shading<'_, S> {
                 Ok(())
             }
             Err(TooCostly) if unknown => {
-                self.shade_each(queries, &points[..1], threshold, visibility, write, out)?;
-                let rest = Members {
-                    points: &points[1..],
-                    ..members
-                };
-                self.shade_members(queries, rest, threshold, visibility, write, out)
+                // The first point shaded alone sets the estimate, and the
+                // whole group is tried again with the budget it gives: its
+                // first point is then shaded over the same cut as its
+                // neighbours, not by a cut of its own, which may differ
+                // from theirs by up to the threshold (a speck on a smooth
+                // image).
+                let first = &queries[points[0] as usize];
+                self.shade_alone(first, threshold, &mut *visibility)?;
+                self.shade_members(queries, members, threshold, visibility, write, out)
             }
             // Sharing does not pay here: every point on its own. (Splitting
             // the group in halves and trying again cost more in cuts that
