@@ -374,6 +374,4 @@ mod tests {
         assert!(culled > 0, "no box beside the segments culled");
     }
 
-    /// A group's answer holds for sampled segments between the two boxes:
-    /// none blocked when visible, all blocked when occluded.
 }
