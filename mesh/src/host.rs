@@ -16,6 +16,16 @@ use crate::triangle::blocks;
 /// meets many occluders that cannot be one.
 pub const BLOCKER_CANDIDATES: usize = 4;
 
+/// Occluders a batch of shadow rays from one point
+/// ([`visible_lights`](Visibility::visible_lights)) gathers at most: past
+/// this many in the shaft from the point to the lights' box, the rays
+/// traverse the BVH one by one instead. A leaf's lights lie close
+/// together, so their shaft is narrow and usually meets a few occluders,
+/// which each ray then tests directly (a slab test and, for a triangle,
+/// the segment test) instead of descending the BVH again; a wide shaft
+/// through many occluders would make every ray test all of them.
+pub const BATCH_CANDIDATES_MAX: usize = 64;
+
 /// The visibility host of one thread over shared [`Occluders`]: a
 /// conservative shaft classifier and any-hit shadow rays, with counters of
 /// the work asked of it. Make one per thread (or per batch call) with
@@ -65,13 +75,30 @@ pub const BLOCKER_CANDIDATES: usize = 4;
 /// apex and the node lie within [`BLOCKER_REACH`](crate::BLOCKER_REACH)
 /// times the occluders' largest coordinate ([`Occluders::scale`]), where
 /// the growth of its box covers the slab test's rounding.
+///
+/// # Batches of shadow rays
+///
+/// [`visible_lights`](Visibility::visible_lights) (the lights of a leaf
+/// from one point) first gathers, into the host's own scratch list, the
+/// occluders whose boxes meet the shaft from the point to the lights' box
+/// grown by the margin: as for a [`Coverage::Visible`] answer, no other
+/// occluder's slab test can meet any of the segments. Each segment then
+/// runs the shadow ray's own tests against the gathered occluders only, so
+/// every answer is the one [`visible`](Visibility::visible) gives. Past
+/// [`BATCH_CANDIDATES_MAX`] occluders the rays are cast one by one.
 #[derive(Clone, Debug)]
 pub struct Shadows<'o> {
     occluders: &'o Occluders,
     /// Classifications answered: visible, occluded, partial.
     pub answers: [u64; 3],
-    /// Shadow rays cast.
+    /// Shadow rays cast (one per light asked about, batched or not).
     pub rays: u64,
+    /// Of [`rays`](Self::rays), those answered in batches against gathered
+    /// occluders (see "Batches of shadow rays").
+    pub batched: u64,
+    /// The occluders' slots a batch of shadow rays tests: scratch space,
+    /// kept between calls so that a warmed host allocates nothing.
+    candidates: Vec<u32>,
 }
 
 impl<'o> Shadows<'o> {
@@ -81,6 +108,8 @@ impl<'o> Shadows<'o> {
             occluders,
             answers: [0; 3],
             rays: 0,
+            batched: 0,
+            candidates: Vec::new(),
         }
     }
 
@@ -103,18 +132,55 @@ impl<'o> Shadows<'o> {
         coverage
     }
 
+    /// The classifier's margin for segments between `from` and `target`
+    /// ([`MARGIN_ULPS`]` f32::EPSILON` of the largest coordinate involved,
+    /// the occluders' included) and that coordinate; `None` when one is not
+    /// finite.
+    fn margin(&self, from: &Aabb, target: &Aabb) -> Option<(f32, f32)> {
+        let magnitude = [from.min, from.max, target.min, target.max]
+            .iter()
+            .fold(self.occluders.scale, |m, p| m.max(p.abs().max_element()));
+        magnitude
+            .is_finite()
+            .then_some((MARGIN_ULPS * f32::EPSILON * magnitude, magnitude))
+    }
+
+    /// Gathers into `self.candidates` the slots of the occluders whose boxes
+    /// meet the shaft from `point` to `target` grown by the margin (every
+    /// occluder a segment's slab test may meet); `false` if there are more
+    /// than [`BATCH_CANDIDATES_MAX`] of them, or a coordinate is not finite.
+    fn gather(&mut self, point: Vec3, target: &Aabb) -> bool {
+        let occ = self.occluders;
+        self.candidates.clear();
+        let from = Aabb {
+            min: point,
+            max: point,
+        };
+        let Some((margin, _)) = self.margin(&from, target) else {
+            return false;
+        };
+        let shaft = Shaft::new(point, target, margin);
+        let candidates = &mut self.candidates;
+        let crowded = occ.bvh.any_in(
+            |b| shaft.meets(b),
+            |slot| {
+                if shaft.meets(&occ.bounds[slot]) {
+                    candidates.push(slot as u32);
+                }
+                candidates.len() > BATCH_CANDIDATES_MAX
+            },
+        );
+        !crowded
+    }
+
     fn classification(&self, from: &Aabb, target: &Aabb) -> Coverage {
         let occ = self.occluders;
         if occ.is_empty() {
             return Coverage::Visible;
         }
-        let magnitude = [from.min, from.max, target.min, target.max]
-            .iter()
-            .fold(occ.scale, |m, p| m.max(p.abs().max_element()));
-        if !magnitude.is_finite() {
+        let Some((margin, magnitude)) = self.margin(from, target) else {
             return Coverage::Partial;
-        }
-        let margin = MARGIN_ULPS * f32::EPSILON * magnitude;
+        };
         let (centre, middle) = (centre(from), centre(target));
         let (occluded, centre_blocked) =
             self.single_blocker(from, target, centre, middle, margin, magnitude);
@@ -177,7 +243,14 @@ impl<'o> Shadows<'o> {
                     within
                         && gap > 0.0
                         && if partner == NO_PARTNER {
-                            blocks(&[v], &[[true; 3]], from, target, f64::from(occ.offset) / gap, m)
+                            blocks(
+                                &[v],
+                                &[[true; 3]],
+                                from,
+                                target,
+                                f64::from(occ.offset) / gap,
+                                m,
+                            )
                         } else {
                             let Prim::Triangle {
                                 v: w,
@@ -263,5 +336,33 @@ impl Visibility for Shadows<'_> {
     fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
         self.rays += 1;
         !self.occluders.blocked(point, light)
+    }
+
+    /// The shadow rays of [`visible`](Visibility::visible) against the
+    /// occluders gathered once for all of them (see the type's
+    /// documentation, "Batches of shadow rays"): the same answers.
+    fn visible_lights(&mut self, point: Vec3, lights: &[Vec3], seen: &mut [bool]) {
+        let occ = self.occluders;
+        let target = lights.iter().fold(
+            Aabb {
+                min: Vec3::INFINITY,
+                max: Vec3::NEG_INFINITY,
+            },
+            |b, &l| Aabb {
+                min: b.min.min(l),
+                max: b.max.max(l),
+            },
+        );
+        if occ.is_empty() || lights.len() < 2 || !self.gather(point, &target) {
+            for (&light, seen) in lights.iter().zip(seen) {
+                *seen = self.visible(point, light);
+            }
+            return;
+        }
+        self.rays += lights.len() as u64;
+        self.batched += lights.len() as u64;
+        for (&light, seen) in lights.iter().zip(seen) {
+            *seen = !occ.blocked_by(&self.candidates, point, light);
+        }
     }
 }

@@ -90,10 +90,10 @@ mod triangle;
 
 pub use bvh::corners;
 pub use error::MeshError;
-pub use host::{BLOCKER_CANDIDATES, Shadows};
+pub use host::{BATCH_CANDIDATES_MAX, BLOCKER_CANDIDATES, Shadows};
 pub use obvhs;
 pub use occluders::{
-    BLOCKER_REACH, DEFAULT_OFFSET_SCALE, MARGIN_ULPS, Occluders, OccludersBuilder, QUAD_COPLANAR_COS,
-    RAY_BOX_ULPS,
+    BLOCKER_REACH, DEFAULT_OFFSET_SCALE, MARGIN_ULPS, Occluders, OccludersBuilder,
+    QUAD_COPLANAR_COS, RAY_BOX_ULPS, box_mesh,
 };
 pub use triangle::PREDICATE_SLACK;

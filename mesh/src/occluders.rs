@@ -54,6 +54,27 @@ pub const DEFAULT_OFFSET_SCALE: f32 = 1.0 / 8192.0;
 /// triangle's own plane, so no value of it can make an answer wrong.
 pub const QUAD_COPLANAR_COS: f64 = 0.9999;
 
+/// The closed surface of the box `b` as an indexed mesh: its eight corners
+/// (as [`corners`](crate::corners) orders them) and twelve triangles wound
+/// outwards, each face two triangles sharing a diagonal (paired into a
+/// quad by [`OccludersBuilder::build`]).
+pub fn box_mesh(b: &Aabb) -> ([Vec3; 8], [u32; 36]) {
+    // Corner k takes the maximum on axis a where bit a of k is set.
+    const FACES: [[u32; 4]; 6] = [
+        [0, 2, 6, 4], // -x
+        [1, 5, 7, 3], // +x
+        [0, 4, 5, 1], // -y
+        [2, 3, 7, 6], // +y
+        [0, 1, 3, 2], // -z
+        [4, 6, 7, 5], // +z
+    ];
+    let indices = std::array::from_fn(|i| {
+        let f = FACES[i / 6];
+        [f[0], f[1], f[2], f[0], f[2], f[3]][i % 6]
+    });
+    (crate::corners(b), indices)
+}
+
 /// No partner triangle.
 pub(crate) const NO_PARTNER: u32 = u32::MAX;
 
@@ -123,7 +144,7 @@ impl OccludersBuilder {
         if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
             return Err(MeshError::NonFinite { mesh, vertex });
         }
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             return Err(MeshError::IndicesNotTriangles {
                 mesh,
                 len: indices.len(),
@@ -155,7 +176,10 @@ impl OccludersBuilder {
         if triangles.is_empty() {
             return Err(MeshError::EmptyMesh { mesh });
         }
-        if let Some(k) = triangles.iter().position(|t| !t.iter().all(|p| p.is_finite())) {
+        if let Some(k) = triangles
+            .iter()
+            .position(|t| !t.iter().all(|p| p.is_finite()))
+        {
             return Err(MeshError::NonFinite {
                 mesh,
                 vertex: 3 * k,
@@ -370,15 +394,33 @@ impl Occluders {
     /// the offset: the host's shadow ray (see [`Shadows`]), an any-hit
     /// traversal of the BVH.
     pub fn blocked(&self, from: Vec3, to: Vec3) -> bool {
-        let d = to.as_dvec3() - from.as_dvec3();
-        let length = d.length();
-        if length == 0.0 || !length.is_finite() {
+        let Some((segment, t_min)) = self.shadow_ray(from, to) else {
             return false;
-        }
-        let t_min = f64::from(self.offset) / length;
-        let segment = Segment::new(from, to);
+        };
         self.bvh
             .any_along(&segment, |slot| self.hits(slot, &segment, from, to, t_min))
+    }
+
+    /// The segment of a shadow ray from `from` to `to`, and the parameter
+    /// the offset reaches along it; `None` for a segment of zero or
+    /// non-finite length, which nothing blocks.
+    #[inline]
+    fn shadow_ray(&self, from: Vec3, to: Vec3) -> Option<(Segment, f64)> {
+        let length = (to.as_dvec3() - from.as_dvec3()).length();
+        (length != 0.0 && length.is_finite())
+            .then(|| (Segment::new(from, to), f64::from(self.offset) / length))
+    }
+
+    /// [`blocked`](Self::blocked), testing only the occluders in `slots`
+    /// (which must hold every one whose box the segment's slab test may
+    /// meet) instead of traversing the BVH.
+    pub(crate) fn blocked_by(&self, slots: &[u32], from: Vec3, to: Vec3) -> bool {
+        let Some((segment, t_min)) = self.shadow_ray(from, to) else {
+            return false;
+        };
+        slots
+            .iter()
+            .any(|&slot| self.hits(slot as usize, &segment, from, to, t_min))
     }
 
     /// Whether the shadow ray `segment` (from `from` to `to`, hits counted

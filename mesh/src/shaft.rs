@@ -300,7 +300,6 @@ fn hull(points: &mut [(Vec2, bool)]) -> Vec<((Vec2, bool), (Vec2, bool))> {
         .collect()
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -373,5 +372,4 @@ mod tests {
         }
         assert!(culled > 0, "no box beside the segments culled");
     }
-
 }

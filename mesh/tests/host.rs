@@ -66,7 +66,9 @@ fn scene(rng: &mut Rng) -> Occluders {
 /// Whether `coverage` agrees with the host's shadow rays between every pair
 /// of `starts` and `ends`.
 fn agrees(host: &mut Shadows<'_>, starts: &[Vec3], ends: &[Vec3], coverage: Coverage) -> bool {
-    let mut all = starts.iter().flat_map(|&p| ends.iter().map(move |&q| (p, q)));
+    let mut all = starts
+        .iter()
+        .flat_map(|&p| ends.iter().map(move |&q| (p, q)));
     match coverage {
         Coverage::Visible => all.all(|(p, q)| host.visible(p, q)),
         Coverage::Occluded => all.all(|(p, q)| !host.visible(p, q)),
@@ -117,6 +119,53 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// A batch of shadow rays from one point (the lights of a leaf, close
+    /// together or spread out) answers each light as one ray does.
+    #[test]
+    fn batched_rays_answer_as_single_rays(seed in any::<u64>()) {
+        let mut rng = Rng::new(seed);
+        let occluders = scene(&mut rng);
+        let mut host = occluders.host();
+        for _ in 0..8 {
+            let point = rng.vec(-12.0, 12.0);
+            let spread = [0.05, 0.5, 3.0, 12.0][rng.below(4)];
+            let cluster = rng.boxed(12.0, spread, 0.2);
+            let lights: Vec<Vec3> = (0..1 + rng.below(32)).map(|_| rng.in_box(&cluster)).collect();
+            let mut seen = vec![false; lights.len()];
+            host.visible_lights(point, &lights, &mut seen);
+            for (&light, &seen) in lights.iter().zip(&seen) {
+                prop_assert_eq!(seen, !occluders.blocked(point, light), "{} to {}", point, light);
+            }
+        }
+    }
+}
+
+/// Batches of shadow rays are answered from gathered occluders (not only
+/// one ray at a time), and some of their rays are blocked.
+#[test]
+fn batches_use_gathered_occluders() {
+    let (mut batched, mut rays, mut blocked) = (0, 0, 0);
+    for seed in 0..100 {
+        let mut rng = Rng::new(seed);
+        let occluders = scene(&mut rng);
+        let mut host = occluders.host();
+        for _ in 0..8 {
+            let point = rng.vec(-12.0, 12.0);
+            let cluster = rng.boxed(12.0, 0.5, 0.2);
+            let lights: Vec<Vec3> = (0..16).map(|_| rng.in_box(&cluster)).collect();
+            let mut seen = [false; 16];
+            host.visible_lights(point, &lights, &mut seen);
+            blocked += seen.iter().filter(|&&s| !s).count();
+        }
+        (batched, rays) = (batched + host.batched, rays + host.rays);
+    }
+    assert!(batched > rays / 2, "{batched} of {rays} rays batched");
+    assert!(blocked > 0);
+}
+
 /// Every answer occurs on the scenes above, from points and from groups,
 /// so the tests above check something.
 #[test]
@@ -129,7 +178,13 @@ fn every_answer_occurs() {
         for _ in 0..16 {
             let target = rng.boxed(12.0, 5.0, 0.2);
             let point = rng.vec(-12.0, 12.0);
-            points[host.classify_boxes(&Aabb { min: point, max: point }, &target) as usize] += 1;
+            points[host.classify_boxes(
+                &Aabb {
+                    min: point,
+                    max: point,
+                },
+                &target,
+            ) as usize] += 1;
             let group = rng.boxed(12.0, 1.0, 0.3);
             groups[host.classify_boxes(&group, &target) as usize] += 1;
         }
@@ -144,7 +199,10 @@ fn clustered_lights(rng: &mut Rng, count: usize) -> Vec<PointLight> {
     (0..count)
         .map(|i| {
             let c = &clusters[i % clusters.len()];
-            PointLight::new(rng.in_box(c), Vec3::new(1.0, 0.8, 0.6) * rng.range(0.2, 2.0))
+            PointLight::new(
+                rng.in_box(c),
+                Vec3::new(1.0, 0.8, 0.6) * rng.range(0.2, 2.0),
+            )
         })
         .collect()
 }
@@ -311,7 +369,10 @@ fn bad_input_gets_an_error() {
         max: Vec3::splat(f32::INFINITY),
     };
     let occluders = Occluders::from_mesh(&p, &[0, 1, 2]).unwrap();
-    assert_eq!(occluders.host().classify_boxes(&from, &far), Coverage::Partial);
+    assert_eq!(
+        occluders.host().classify_boxes(&from, &far),
+        Coverage::Partial
+    );
     assert!(occluders.host().visible(Vec3::ZERO, Vec3::splat(f32::NAN)));
 }
 
@@ -390,7 +451,13 @@ fn triangles_block_whole_nodes() {
         for _ in 0..16 {
             let target = rng.boxed(20.0, 2.0, 0.2);
             let point = rng.vec(-2.0, 20.0) * Vec3::new(1.0, 1.0, 0.2);
-            answers[host.classify_boxes(&Aabb { min: point, max: point }, &target) as usize] += 1;
+            answers[host.classify_boxes(
+                &Aabb {
+                    min: point,
+                    max: point,
+                },
+                &target,
+            ) as usize] += 1;
         }
     }
     assert!(answers.iter().all(|&a| a > 0), "{answers:?}");

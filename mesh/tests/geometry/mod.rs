@@ -74,24 +74,14 @@ impl Mesh {
     }
 }
 
-/// The closed surface of a box, 12 triangles wound outwards (each face two
-/// triangles sharing a diagonal).
+/// The closed surface of a box, 12 triangles wound outwards (the crate's
+/// [`box_mesh`](manylights_mesh::box_mesh)).
 pub fn box_mesh(b: &Aabb) -> Mesh {
-    let positions = manylights_mesh::corners(b).to_vec();
-    // Corner k has bit a set where it takes the maximum on axis a.
-    let faces: [[u32; 4]; 6] = [
-        [0, 2, 6, 4], // -x
-        [1, 5, 7, 3], // +x
-        [0, 4, 5, 1], // -y
-        [2, 3, 7, 6], // +y
-        [0, 1, 3, 2], // -z
-        [4, 6, 7, 5], // +z
-    ];
-    let indices = faces
-        .iter()
-        .flat_map(|f| [f[0], f[1], f[2], f[0], f[2], f[3]])
-        .collect();
-    Mesh { positions, indices }
+    let (positions, indices) = manylights_mesh::box_mesh(b);
+    Mesh {
+        positions: positions.to_vec(),
+        indices: indices.to_vec(),
+    }
 }
 
 /// A closed UV sphere of `rings` x `segments` quads (the poles fans).
@@ -101,7 +91,11 @@ pub fn sphere_mesh(centre: Vec3, radius: f32, rings: u32, segments: u32) -> Mesh
         let theta = std::f32::consts::PI * r as f32 / rings as f32;
         for s in 0..segments {
             let phi = std::f32::consts::TAU * s as f32 / segments as f32;
-            let dir = Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+            let dir = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            );
             positions.push(centre + dir * radius);
         }
     }
