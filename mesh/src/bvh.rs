@@ -170,3 +170,14 @@ pub fn corners(b: &Aabb) -> [Vec3; 8] {
         )
     })
 }
+
+/// The distinct corners of a box: its [`corners`] without the repeats of a
+/// box flat along some axes (one for a point, two for a segment, four for
+/// a rectangle), which span the same convex set.
+pub(crate) fn distinct_corners(b: &Aabb) -> impl Iterator<Item = Vec3> + Clone {
+    let flat = [0, 1, 2].map(|a| b.min[a] == b.max[a]);
+    let all = corners(b);
+    (0..8usize)
+        .filter(move |k| (0..3).all(|a| !flat[a] || k & (1 << a) == 0))
+        .map(move |k| all[k])
+}

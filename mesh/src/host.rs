@@ -4,10 +4,10 @@ use glam::{DVec3, Vec3};
 use manylights::{Aabb, Coverage, NodeRegion, PointGroup, Visibility};
 use obvhs::aabb::Aabb as BvhAabb;
 
-use crate::bvh::{Segment, corners};
+use crate::bvh::{Segment, distinct_corners};
 use crate::occluders::{BLOCKER_REACH, MARGIN_ULPS, NO_PARTNER, Occluders, Prim};
 use crate::shaft::Shaft;
-use crate::triangle::blocks;
+use crate::triangle::{blocks, clears};
 
 /// Occluders tried as the single blocker of a node: the first few that the
 /// segment between the centres of the apex's box and the node's box meets,
@@ -67,8 +67,13 @@ pub const BATCH_CANDIDATES_MAX: usize = 64;
 ///   blocked.
 /// * [`Coverage::Visible`] when no occluder's box (a triangle's grown by
 ///   [`RAY_BOX_ULPS`](crate::RAY_BOX_ULPS)) meets the shaft of the two
-///   boxes grown by the margin: every segment's slab tests then miss every
-///   occluder. [`Coverage::Partial`] otherwise.
+///   boxes grown by the margin, every segment's slab tests then missing
+///   every occluder; or when each triangle whose box meets it is one that
+///   every segment leaves behind within the offset (the surface the
+///   shading point, or the group, lies on: the segments start on its plane
+///   and the node lies clear of that plane on one side), so that no
+///   segment's test can hit it past the offset. [`Coverage::Partial`]
+///   otherwise.
 ///
 /// The margin is [`MARGIN_ULPS`]` f32::EPSILON` times the largest
 /// coordinate involved. A triangle is tried as a blocker only while the
@@ -195,8 +200,18 @@ impl<'o> Shadows<'o> {
         } else {
             Shaft::between(from, target, margin)
         };
-        let meets = |b: &BvhAabb| shaft.meets(b);
-        if occ.bvh.any_in(meets, |slot| meets(&occ.bounds[slot])) {
+        // Triangles that every segment leaves behind within the offset (the
+        // surface the apex lies on) cannot block one.
+        let t_min_bound = (f64::from(occ.offset) / box_reach(from, target)).min(1.0);
+        let m = 2.0 * f64::from(magnitude);
+        let blocks_some = |slot: usize| {
+            shaft.meets(&occ.bounds[slot])
+                && match &occ.prims[slot] {
+                    Prim::Box => true,
+                    Prim::Triangle { v, .. } => !clears(v, from, target, t_min_bound, m),
+                }
+        };
+        if occ.bvh.any_in(|b| shaft.meets(b), blocks_some) {
             Coverage::Partial
         } else {
             Coverage::Visible
@@ -295,15 +310,21 @@ fn box_blocks(b: &BvhAabb, from: &Aabb, target: &Aabb, margin: f32, offset: f32)
     if touching {
         return false;
     }
-    let ends = corners(target);
-    corners(from)
-        .iter()
-        .all(|&p| ends.iter().all(|&q| Segment::new(p, q).hits(&core)))
+    let ends = distinct_corners(target);
+    distinct_corners(from).all(|p| ends.clone().all(|q| Segment::new(p, q).hits(&core)))
 }
 
 /// The centre of a box.
 fn centre(b: &Aabb) -> Vec3 {
     0.5 * (b.min + b.max)
+}
+
+/// An upper bound on the length of a segment between two boxes (the
+/// distance between farthest corners), in `f64`, grown by a relative
+/// `2^-40` for its rounding.
+fn box_reach(a: &Aabb, b: &Aabb) -> f64 {
+    let (lo, hi) = (a.min.min(b.min).as_dvec3(), a.max.max(b.max).as_dvec3());
+    (hi - lo).length() * (1.0 + 1.0 / (1u64 << 40) as f64)
 }
 
 /// A lower bound on the distance between two boxes, in `f64` (0 when they

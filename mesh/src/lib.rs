@@ -65,6 +65,10 @@
 //!   axis, twice for the segment's two ends' differences) and the shaft
 //!   planes' own (a few `f32::EPSILON`, in units of each plane normal's
 //!   1-norm) many times over: no segment's slab test can meet an occluder.
+//! * `Visible` past a triangle that every segment leaves behind within the
+//!   offset (the surface the shading point lies on): the segments' signed
+//!   crossing predicates clear [`PREDICATE_SLACK`]` M^3` at every pair of
+//!   corners, so no computed crossing comes past the offset (see below).
 //! * `Occluded` by a box: the box shrunk by the margin meets the segments
 //!   between the corners, so by convexity every segment passes at least a
 //!   margin deep through the box, farther than its slab test's rounding.

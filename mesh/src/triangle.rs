@@ -39,7 +39,7 @@
 use glam::{DVec3, Vec3};
 use manylights::Aabb;
 
-use crate::bvh::corners;
+use crate::bvh::distinct_corners;
 
 /// A predicate of a blocker must exceed this times `M^3` (`M` bounding the
 /// differences of the coordinates involved) at every pair of corners: far
@@ -96,16 +96,21 @@ pub(crate) fn blocks(
     m: f64,
 ) -> bool {
     let slack = PREDICATE_SLACK * m * m * m;
-    let ends = corners(to).map(Vec3::as_dvec3);
+    let (mut ends, mut count) = ([DVec3::ZERO; 8], 0);
+    for q in distinct_corners(to) {
+        ends[count] = q.as_dvec3();
+        count += 1;
+    }
+    let ends = &ends[..count];
     let mut sign = 0.0;
-    for p in corners(from) {
+    for p in distinct_corners(from) {
         let o = p.as_dvec3();
         for (tri, outer) in tris.iter().zip(outer) {
             let (normals, _, t) = edges(o, tri);
             if sign == 0.0 {
                 sign = t.signum();
             }
-            for q in ends {
+            for &q in ends {
                 let d = q - o;
                 let [u, w, x] = normals.map(|n| sign * d.dot(n));
                 let det = u + w + x;
@@ -121,6 +126,49 @@ pub(crate) fn blocks(
                 if !(st - t_min_bound * det >= slack && det - st >= slack) {
                     return false;
                 }
+            }
+        }
+    }
+    sign != 0.0
+}
+
+/// Whether no segment from a point of `from` to a point of `to` can hit the
+/// triangle `v` past the offset, robustly: every segment meets the
+/// triangle's plane (if at all) at a parameter below `t_min_bound`, which
+/// must be at most `1` and at most the offset over the length of every
+/// such segment. This is the surface a shading point lies on (or one it
+/// faces from within the offset), which its shadow rays skip.
+///
+/// Every predicate, `s det = s d . N` (the segment crosses the plane in
+/// one direction, `s` its sign) and `t_min_bound s det - s T` (the crossing
+/// comes before `t_min_bound`), must clear [`PREDICATE_SLACK`]` M^3` at
+/// every pair of corners. Both are affine in each end separately, so they
+/// clear it, less twice their error, at every pair of points, and the shadow
+/// ray's computed test `s T >= t_min (s det)` fails for every segment: its
+/// `t_min` is at least `t_min_bound`, and its roundings are far below the
+/// slack (see the module documentation).
+pub(crate) fn clears(v: &[Vec3; 3], from: &Aabb, to: &Aabb, t_min_bound: f64, m: f64) -> bool {
+    let slack = PREDICATE_SLACK * m * m * m;
+    let (mut ends, mut count) = ([DVec3::ZERO; 8], 0);
+    for q in distinct_corners(to) {
+        ends[count] = q.as_dvec3();
+        count += 1;
+    }
+    let ends = &ends[..count];
+    let mut sign = 0.0;
+    for p in distinct_corners(from) {
+        let o = p.as_dvec3();
+        let ([bc, ca, ab], _, t) = edges(o, v);
+        for &q in ends {
+            // As the shadow ray sums it.
+            let d = q - o;
+            let det = d.dot(bc) + d.dot(ca) + d.dot(ab);
+            if sign == 0.0 {
+                sign = det.signum();
+            }
+            let (sdet, st) = (sign * det, sign * t);
+            if !(sdet >= slack && t_min_bound * sdet - st >= slack) {
+                return false;
             }
         }
     }

@@ -166,6 +166,104 @@ fn batches_use_gathered_occluders() {
     assert!(blocked > 0);
 }
 
+/// A point on a triangle of the scene (or just off it, within the
+/// offset), as a renderer's shading points lie on its surfaces, and the
+/// triangle's normal.
+fn on_surface(rng: &mut Rng, occluders: &Occluders, triangles: &[[Vec3; 3]]) -> (Vec3, Vec3) {
+    let t = triangles[rng.below(triangles.len())];
+    let (a, b) = (rng.unit(), rng.unit());
+    let (a, b) = if a + b > 1.0 {
+        (1.0 - a, 1.0 - b)
+    } else {
+        (a, b)
+    };
+    let normal = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+    let lift = occluders.offset() * rng.range(-0.5, 0.5) * f32::from(rng.below(2) as u8);
+    (
+        t[0] + (t[1] - t[0]) * a + (t[2] - t[0]) * b + normal * lift,
+        normal,
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// From points on the occluders' own surfaces (the shadow rays skip the
+    /// surface within the offset): never visible when a sampled segment is
+    /// blocked, never occluded when one is free.
+    #[test]
+    fn answers_from_surfaces_agree_with_rays(seed in any::<u64>()) {
+        let mut rng = Rng::new(seed);
+        let (mesh, _) = buildings(&mut rng, 3, 6.0);
+        let triangles: Vec<[Vec3; 3]> = mesh
+            .indices
+            .chunks_exact(3)
+            .map(|t| [0, 1, 2].map(|k| mesh.positions[t[k] as usize]))
+            .collect();
+        let occluders = Occluders::builder().triangles(&triangles).unwrap().build();
+        let mut host = occluders.host();
+        for _ in 0..16 {
+            let (point, normal) = on_surface(&mut rng, &occluders, &triangles);
+            // Nodes in front of the surface, mostly.
+            let centre = point + normal * rng.range(-2.0, 12.0) + rng.vec(-8.0, 8.0);
+            let half = rng.vec(0.01, 3.0);
+            let target = Aabb { min: centre - half, max: centre + half };
+            let coverage = host.classify_boxes(&Aabb { min: point, max: point }, &target);
+            let ends = box_points(&mut rng, &target, 3, 24);
+            prop_assert!(
+                agrees(&mut host, &[point], &ends, coverage),
+                "{coverage:?} for {target:?} from {point}"
+            );
+            // A patch of the same triangle's surface as a group.
+            let (other, _) = on_surface(&mut rng, &occluders, &triangles);
+            let group = Aabb { min: point.min(point + (other - point) * 0.05), max: point.max(point + (other - point) * 0.05) };
+            let coverage = host.classify_boxes(&group, &target);
+            let starts = box_points(&mut rng, &group, 2, 4);
+            prop_assert!(
+                agrees(&mut host, &starts, &ends, coverage),
+                "{coverage:?} for {target:?} from {group:?}"
+            );
+        }
+    }
+}
+
+/// A point on a wall sees a node in front of the wall as visible (the
+/// wall, its own surface, cannot block a ray past the offset), from a
+/// point and from a patch of the wall; a node in the wall's plane is not
+/// visible.
+#[test]
+fn the_points_own_surface_does_not_hide_what_it_faces() {
+    let wall = [
+        Vec3::new(5.0, -4.0, -4.0),
+        Vec3::new(5.0, 4.0, -4.0),
+        Vec3::new(5.0, 4.0, 4.0),
+        Vec3::new(5.0, -4.0, 4.0),
+    ];
+    let occluders = Occluders::from_mesh(&wall, &[0, 1, 2, 0, 2, 3]).unwrap();
+    let mut host = occluders.host();
+    let point = Aabb {
+        min: Vec3::new(5.0, 0.5, 0.25),
+        max: Vec3::new(5.0, 0.5, 0.25),
+    };
+    let front = Aabb {
+        min: Vec3::new(1.0, -1.0, -1.0),
+        max: Vec3::new(2.0, 1.0, 1.0),
+    };
+    assert_eq!(host.classify_boxes(&point, &front), Coverage::Visible);
+    // Grazing: a node in the wall's own plane is not claimed visible.
+    let along = Aabb {
+        min: Vec3::new(4.5, 6.0, -1.0),
+        max: Vec3::new(5.5, 7.0, 1.0),
+    };
+    assert_ne!(host.classify_boxes(&point, &along), Coverage::Visible);
+    // A patch of the wall as a group.
+    let patch = Aabb {
+        min: Vec3::new(5.0, 0.0, 0.0),
+        max: Vec3::new(5.0, 1.0, 1.0),
+    };
+    assert_eq!(host.classify_boxes(&patch, &front), Coverage::Visible);
+}
+
 /// Every answer occurs on the scenes above, from points and from groups,
 /// so the tests above check something.
 #[test]
