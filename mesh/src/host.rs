@@ -10,10 +10,11 @@ use crate::shaft::Shaft;
 use crate::triangle::{blocks, clears};
 
 /// Occluders tried as the single blocker of a node: the first few that the
-/// segment between the centres of the apex's box and the node's box meets,
-/// in the BVH's traversal order (nearer child first). A blocker of a whole
-/// node is nearly always among them, and a long segment through foliage
-/// meets many occluders that cannot be one.
+/// shadow ray between the centres of the apex's box and the node's box
+/// hits (one that does not cannot block every segment), in the BVH's
+/// traversal order, a quad counted once. A blocker of a whole node is
+/// nearly always among them, and a long segment through foliage meets many
+/// occluders that cannot be one.
 pub const BLOCKER_CANDIDATES: usize = 4;
 
 /// Occluders a batch of shadow rays from one point
@@ -61,8 +62,8 @@ pub const BATCH_CANDIDATES_MAX: usize = 64;
 ///   or a quad of two, whose predicates clear their slack at every pair of
 ///   corners (see `triangle`'s rounding note in the crate documentation),
 ///   crossed at least the offset from the apex. Only the first
-///   [`BLOCKER_CANDIDATES`] occluders along the segment between the two
-///   boxes' centres are tried.
+///   [`BLOCKER_CANDIDATES`] occluders that the shadow ray between the two
+///   boxes' centres hits are tried.
 /// * [`Coverage::Partial`] when a shadow ray between the two centres is
 ///   blocked.
 /// * [`Coverage::Visible`] when no occluder's box (a triangle's grown by
@@ -245,12 +246,22 @@ impl<'o> Shadows<'o> {
         let within = magnitude <= BLOCKER_REACH * occ.scale;
         let m = 2.0 * f64::from(magnitude);
         let (mut tried, mut occluded, mut centre_blocked) = (0, false, false);
+        let mut last = NO_PARTNER;
         occ.bvh.any_along(&between, |slot| {
             let b = &occ.bounds[slot];
-            if !between.hits(b) {
+            // An occluder that blocks every segment blocks the one between
+            // the centres: only those are tried, and a quad once.
+            if !occ.hits(slot, &between, centre, middle, t_min) {
                 return false;
             }
-            centre_blocked |= occ.hits(slot, &between, centre, middle, t_min);
+            centre_blocked = true;
+            if let Prim::Triangle { partner, .. } = occ.prims[slot]
+                && partner == last
+                && partner != NO_PARTNER
+            {
+                return false;
+            }
+            last = slot as u32;
             tried += 1;
             occluded = match occ.prims[slot] {
                 Prim::Box => box_blocks(b, from, target, margin, occ.offset),
