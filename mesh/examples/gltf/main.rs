@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! cargo run --release -p manylights-mesh --example gltf -- scene.glb   # your scene
-//! cargo run --release -p manylights-mesh --example gltf                # a built-in street
+//! cargo run --release -p manylights-mesh --example gltf                # a built-in street, 700 lights
 //! cargo run --release -p manylights-mesh --example gltf -- scene.glb --size 640x360 --threshold 0.02 --out out
 //! ```
 //!
@@ -75,16 +75,16 @@ fn main() -> Result<(), Box<dyn Error>> {
     render(&scene, size, threshold, &out)
 }
 
-/// The built-in scene: a street of box buildings on a ground, lamps along
-/// it and lit windows on the façades, a few of them spot lights, and a
-/// camera down the street.
+/// The built-in scene: a street of box buildings on a ground, lit windows
+/// on the façades, lamps along both kerbs (every fourth a spot light) and
+/// strings of small lights across the street, with a camera above it.
 fn builtin() -> Vec<u8> {
     let mut meshes = vec![MeshSpec {
         positions: vec![
-            Vec3::new(-20.0, -10.0, 0.0),
-            Vec3::new(120.0, -10.0, 0.0),
-            Vec3::new(120.0, 50.0, 0.0),
-            Vec3::new(-20.0, 50.0, 0.0),
+            Vec3::new(-30.0, -10.0, 0.0),
+            Vec3::new(130.0, -10.0, 0.0),
+            Vec3::new(130.0, 40.0, 0.0),
+            Vec3::new(-30.0, 40.0, 0.0),
         ],
         indices: vec![0, 1, 2, 0, 2, 3],
         colour: Vec3::new(0.4, 0.4, 0.42),
@@ -98,28 +98,25 @@ fn builtin() -> Vec<u8> {
         state ^= state << 17;
         (state >> 40) as f32 / (1u64 << 24) as f32
     };
-    for side in [0.0f32, 1.0] {
+    // The street runs along x between y = 10 and y = 20.
+    for side in [false, true] {
         for k in 0..8 {
             let x = k as f32 * 12.5;
-            let (w, d, h) = (9.0 + 2.0 * next(), 8.0 + 4.0 * next(), 8.0 + 22.0 * next());
-            let y = if side == 0.0 { 2.0 } else { 28.0 - d };
+            let (w, d, h) = (9.0 + 2.0 * next(), 6.0 + 4.0 * next(), 8.0 + 22.0 * next());
+            let y = if side { 20.0 } else { 10.0 - d };
             let b = manylights::Aabb {
-                min: Vec3::new(x, y + 0.0 * side, 0.0),
+                min: Vec3::new(x, y, 0.0),
                 max: Vec3::new(x + w, y + d, h),
             };
             let (corners, indices) = box_mesh(&b);
-            let tint = 0.15 + 0.25 * next();
+            let tint = 0.3 + 0.4 * next();
             meshes.push(MeshSpec {
                 positions: corners.to_vec(),
                 indices: indices.to_vec(),
                 colour: Vec3::new(tint, tint * 0.95, tint * 0.9),
             });
-            // Lit windows on the façade facing the street.
-            let face = if side == 0.0 {
-                b.max.y + 0.3
-            } else {
-                b.min.y - 0.3
-            };
+            // Lit windows just off the façade facing the street.
+            let face = if side { b.min.y - 0.3 } else { b.max.y + 0.3 };
             let mut z = 2.0;
             while z < h - 1.0 {
                 let mut wx = x + 1.0;
@@ -141,18 +138,36 @@ fn builtin() -> Vec<u8> {
     }
     // Street lamps along both kerbs, every fourth a spot light.
     for k in 0..40 {
-        for y in [12.0, 18.0] {
+        for y in [11.0, 19.0] {
             lights.push(LightSpec {
-                position: Vec3::new(k as f32 * 2.5, y, 5.0 + next()),
+                position: Vec3::new(k as f32 * 2.5, y, 4.5 + next()),
                 colour: Vec3::new(1.0, 0.55, 0.2),
-                intensity: 25.0,
+                intensity: 12.0,
                 spot: k % 4 == 0,
             });
         }
     }
+    // Strings of small lights across the street, sagging in the middle.
+    for k in 0..20 {
+        for j in 0..=16 {
+            let y = 10.5 + 9.0 * j as f32 / 16.0;
+            let sag = 1.5 * (1.0 - ((y - 15.0) / 4.5).powi(2));
+            let hue = [
+                Vec3::new(1.0, 0.3, 0.2),
+                Vec3::new(0.3, 1.0, 0.4),
+                Vec3::new(0.3, 0.5, 1.0),
+            ];
+            lights.push(LightSpec {
+                position: Vec3::new(2.5 + k as f32 * 5.0, y, 8.0 - sag),
+                colour: hue[(j + k) % 3],
+                intensity: 0.6,
+                spot: false,
+            });
+        }
+    }
     let view = View {
-        eye: Vec3::new(-12.0, 15.0, 9.0),
-        target: Vec3::new(60.0, 15.0, 3.0),
+        eye: Vec3::new(-14.0, 15.0, 16.0),
+        target: Vec3::new(50.0, 15.0, 0.0),
         up: Vec3::Z,
         yfov: 50f32.to_radians(),
     };
@@ -375,7 +390,7 @@ fn tiles(hits: &[Option<Hit>], width: u32, height: u32) -> Vec<Vec<usize>> {
     tiles
 }
 
-/// 8-bit sRGB of a linear image exposed so that its 99.5th percentile is
+/// 8-bit sRGB of a linear image exposed so that its 98th percentile is
 /// white.
 fn tone(image: &[DVec3]) -> Vec<u8> {
     let mut levels: Vec<f64> = image
@@ -385,7 +400,7 @@ fn tone(image: &[DVec3]) -> Vec<u8> {
         .collect();
     levels.sort_by(f64::total_cmp);
     let white = levels
-        .get(levels.len() * 995 / 1000)
+        .get(levels.len() * 980 / 1000)
         .copied()
         .unwrap_or(1.0)
         .max(1e-300);
