@@ -34,7 +34,17 @@ use scene::{LightSpec, MeshSpec, Scene, View};
 /// cuts.
 const TILE: u32 = 16;
 
-fn main() -> Result<(), Box<dyn Error>> {
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), Box<dyn Error>> {
     let mut args = std::env::args().skip(1);
     let (mut path, mut size, mut threshold, mut out) =
         (None, (320, 180), 0.01, PathBuf::from("out"));
@@ -52,10 +62,18 @@ fn main() -> Result<(), Box<dyn Error>> {
             _ => path = Some(PathBuf::from(arg)),
         }
     }
+    if size.0 == 0 || size.1 == 0 {
+        return Err("--size needs a width and a height of at least 1".into());
+    }
+    if !(threshold > 0.0 && threshold < 1.0) {
+        return Err(
+            format!("--threshold {threshold}: a relative error in (0, 1) is needed").into(),
+        );
+    }
     let scene = match &path {
         Some(path) => {
-            let bytes = std::fs::read(path)?;
-            scene::load(&bytes, path.parent())?
+            let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+            scene::load(&bytes, path.parent()).map_err(|e| format!("{}: {e}", path.display()))?
         }
         None => {
             println!("no scene given: rendering the built-in street (written as glTF in memory)");
