@@ -78,7 +78,7 @@ pub const BATCH_CANDIDATES_MAX: usize = 64;
 ///
 /// The margin is [`MARGIN_ULPS`]` f32::EPSILON` times the largest
 /// coordinate involved. A triangle is tried as a blocker only while the
-/// apex and the node lie within [`BLOCKER_REACH`](crate::BLOCKER_REACH)
+/// apex and the node lie within [`BLOCKER_REACH`]
 /// times the occluders' largest coordinate ([`Occluders::scale`]), where
 /// the growth of its box covers the slab test's rounding.
 ///
