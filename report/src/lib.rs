@@ -13,6 +13,8 @@
 //!   al. 1996 and Conty & Kulla 2018) and [`shadowed`] (the exact shadowed
 //!   sum and Ward 1991); [`measure`], the sweeps ([`config`], [`sweep`],
 //!   [`occluded`] for the night city with shadows and the canopy,
+//!   [`mesh_city`] for the same city's buildings as triangles under
+//!   `manylights-mesh`'s host,
 //!   [`scaling`]), [`plot`], [`csv`], [`summary`], the
 //!   ground scene's evaluations-per-point table ([`evaluations`]), the
 //!   Lambert bounds on the coloured street city ([`bounds`]), batch
@@ -31,6 +33,7 @@ pub mod evaluations;
 pub mod exact;
 pub mod image;
 pub mod measure;
+pub mod mesh_city;
 pub mod occluded;
 pub mod options;
 pub mod plot;

@@ -21,7 +21,9 @@
 //! call per threshold against the SIMD exact sum, and the seams along a
 //! scanline), `city`, `chandelier`,
 //! `strings`, `specular` (threshold sweeps on unoccluded scenes),
-//! `city-shadows` and `canopy` (the occluded scenes; `shadows` names both)
+//! `city-shadows`, `canopy` and `city-mesh` (the occluded scenes, the last
+//! the city's buildings as triangles under `manylights-mesh`'s host, per
+//! point and through the batch call; `shadows` names all three)
 //! and `scaling` (time against number of lights); no part named means all
 //! of these. `anatomy` (where a certified cut's work goes on the street
 //! city at 10^4 to 10^6 lights: refinements, bounded children by depth and
@@ -61,6 +63,7 @@ use manylights_report::config::{
 use manylights_report::csv::{write_csv, write_scaling_csv};
 use manylights_report::evaluations::print_evaluations_table;
 use manylights_report::measure::MAX_PASSES;
+use manylights_report::mesh_city::{CITY_MESH, run_city_mesh};
 use manylights_report::occluded::run_occluded;
 use manylights_report::plot::{plot_scaling, plot_scene};
 use manylights_report::scaling::run_scaling;
@@ -88,18 +91,21 @@ fn main() -> Result<(), Box<dyn Error>> {
                 let n = args.next().and_then(|n| n.parse().ok());
                 shadow_lights = Some(n.ok_or("--shadow-lights needs a number of lights")?);
             }
-            SHADOWS => parts.extend(OCCLUDED_NAMES.map(String::from)),
+            SHADOWS => {
+                parts.extend(OCCLUDED_NAMES.map(String::from));
+                parts.push(CITY_MESH.into());
+            }
             name if SCENE_NAMES.contains(&name)
                 || OCCLUDED_NAMES.contains(&name)
-                || [EVALUATIONS, BOUNDS, BATCH, SCALING, ANATOMY].contains(&name) =>
+                || [EVALUATIONS, BOUNDS, BATCH, SCALING, ANATOMY, CITY_MESH].contains(&name) =>
             {
                 parts.push(arg)
             }
             _ => {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
-                     [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {SHADOWS} | {SCALING} | \
-                     {ANATOMY}]...",
+                     [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {CITY_MESH} | {SHADOWS} | \
+                     {SCALING} | {ANATOMY}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -181,6 +187,10 @@ fn main() -> Result<(), Box<dyn Error>> {
         plot_scene(&path, &scene, &rows)?;
         println!("  plot: {}\n", path.display());
         records.extend(rows);
+    }
+    if wanted(CITY_MESH) {
+        run_city_mesh(cfg, quick)?;
+        println!();
     }
     if !records.is_empty() {
         write_csv(&out.join("errors.csv"), &records)?;

@@ -4,12 +4,16 @@
 //! the candidate lists of the shafts it has built, which later shafts and
 //! shadow rays inside them test instead of the BVH. It is the recipe for
 //! plugging a renderer's own ray tracer into the crate's `Visibility` trait.
+//! Its shafts are those of `manylights_mesh::shaft`, which the triangle
+//! host of `manylights-mesh` builds too.
 
 use std::ops::Range;
 
-use glam::{BVec3A, BVec4A, Vec2, Vec3, Vec3A, Vec4};
+use glam::{BVec3A, BVec4A, Vec3, Vec3A, Vec4};
 use manylights::{Aabb, Coverage, NodeRegion, PointGroup, Visibility};
 use obvhs::aabb::Aabb as BvhAabb;
+
+use manylights_mesh::shaft::{PAIR_AXES, PointShaft, Shaft};
 
 use crate::bvh::{Occluders, Segment, corners};
 use crate::measure::{Counted, Queries};
@@ -962,247 +966,6 @@ impl Counted for Shadows<'_> {
     }
 }
 
-/// Lanes of a shaft's planes. A shaft from a point to a box has at most six
-/// planes, two per projection; the shaft between two boxes at most eight.
-/// They are stored in two groups of four lanes (the unused ones hold every
-/// point), each tested against a box at once.
-const PLANE_LANES: usize = 8;
-
-/// The shaft from a point to a box, grown by a margin: its bounding box and
-/// the half-spaces `normal . x <= offset` through the point and the box's
-/// silhouette edges (Haines and Wallace 1994; see [`Shadows`]), normals
-/// stored by component, four planes to a vector.
-#[derive(Clone, Copy, Debug)]
-pub struct Shaft {
-    min: Vec3A,
-    max: Vec3A,
-    normal: [[Vec4; PLANE_LANES / 4]; 3],
-    offset: [Vec4; PLANE_LANES / 4],
-}
-
-/// A shaft from a point to a box ([`Shaft::new`]) as it is first found: its
-/// bounding box and its planes, each as `[n_i, n_j, offset]` with the axes
-/// `(i, j)` of [`PAIR_AXES`] (two planes per projection). A child's shaft
-/// filters its parent's list in this form ([`QuadShaft`]); only a shaft
-/// tested against the BVH's nodes is set out as a [`Shaft`].
-struct PointShaft {
-    min: Vec3A,
-    max: Vec3A,
-    pairs: [[f32; 3]; 6],
-}
-
-impl PointShaft {
-    /// The shaft from `apex` to `target`, every face pushed out by `margin`
-    /// (see [`Shaft::new`]).
-    #[inline]
-    fn new(apex: Vec3, target: &Aabb, margin: f32) -> PointShaft {
-        let (p, lo, hi) = (apex, target.min, target.max);
-        // The projections along z (axes x, y), x (y, z) and y (z, x), one a
-        // lane, two planes each.
-        let lanes = |v: Vec3| [Vec4::new(v.x, v.y, v.z, 0.0), Vec4::new(v.y, v.z, v.x, 0.0)];
-        let lines = silhouettes(lanes(p), lanes(lo), lanes(hi), margin);
-        let plane = |m: usize, k: usize| {
-            let [n_i, n_j, offset] = lines[m].map(|v| v.to_array()[k]);
-            [n_i, n_j, offset]
-        };
-        PointShaft {
-            min: Vec3A::from(lo.min(p)) - margin,
-            max: Vec3A::from(hi.max(p)) + margin,
-            pairs: [
-                plane(0, 0),
-                plane(1, 0),
-                plane(0, 1),
-                plane(1, 1),
-                plane(0, 2),
-                plane(1, 2),
-            ],
-        }
-    }
-
-    /// The same shaft set out as a [`Shaft`].
-    fn planes(&self) -> Shaft {
-        let mut shaft = Shaft::boxed(self.min, self.max);
-        for (k, &[a, b, offset]) in self.pairs.iter().enumerate() {
-            let (i, j) = PAIR_AXES[k / 2];
-            shaft.set_plane(k, (i, a), (j, b), offset);
-        }
-        shaft
-    }
-}
-
-/// The axes `(i, j)` of the planes `2 k` and `2 k + 1` of a shaft from a
-/// point: the projections along z, x and y.
-const PAIR_AXES: [(usize, usize); 3] = [(0, 1), (1, 2), (2, 0)];
-
-impl Shaft {
-    /// Only the bounding box of `min` and `max`: every plane holds every
-    /// point.
-    fn boxed(min: Vec3A, max: Vec3A) -> Shaft {
-        Shaft {
-            min,
-            max,
-            normal: [[Vec4::ZERO; PLANE_LANES / 4]; 3],
-            offset: [Vec4::INFINITY; PLANE_LANES / 4],
-        }
-    }
-
-    /// Sets plane `lane` to `n . x <= offset` with `n` zero but for
-    /// components `n_i` and `n_j`.
-    fn set_plane(
-        &mut self,
-        lane: usize,
-        (i, n_i): (usize, f32),
-        (j, n_j): (usize, f32),
-        offset: f32,
-    ) {
-        self.normal[i][lane / 4][lane % 4] = n_i;
-        self.normal[j][lane / 4][lane % 4] = n_j;
-        self.offset[lane / 4][lane % 4] = offset;
-    }
-
-    /// The shaft from `apex` to `target`, every face pushed out by `margin`
-    /// (so that a box grown by `margin` on every side meets the grown shaft
-    /// whenever it meets the shaft).
-    pub fn new(apex: Vec3, target: &Aabb, margin: f32) -> Shaft {
-        PointShaft::new(apex, target, margin).planes()
-    }
-
-    /// The shaft between the boxes `a` and `b`, every face pushed out by
-    /// `margin`: their bounding box and, in each projection along an axis,
-    /// the lines through the edges of the two rectangles' convex hull that
-    /// join one rectangle to the other (at most two per projection), each a
-    /// half-space holding the hull of the boxes.
-    pub fn between(a: &Aabb, b: &Aabb, margin: f32) -> Shaft {
-        let mut shaft = Shaft::boxed(
-            Vec3A::from(a.min.min(b.min)) - margin,
-            Vec3A::from(a.max.max(b.max)) + margin,
-        );
-        let mut count = 0;
-        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
-            let rect = |r: &Aabb| {
-                let (lo, hi) = (Vec2::new(r.min[i], r.min[j]), Vec2::new(r.max[i], r.max[j]));
-                [lo, Vec2::new(hi.x, lo.y), hi, Vec2::new(lo.x, hi.y)]
-            };
-            let mut points: Vec<(Vec2, bool)> = rect(a)
-                .into_iter()
-                .map(|p| (p, false))
-                .chain(rect(b).into_iter().map(|p| (p, true)))
-                .collect();
-            let all: Vec<Vec2> = points.iter().map(|p| p.0).collect();
-            for (p, q) in hull(&mut points) {
-                if p.1 == q.1 {
-                    continue; // an edge of one rectangle: the bounding box holds it
-                }
-                let u = q.0 - p.0;
-                // Counter-clockwise hull: the outward normal is to the right.
-                let n = Vec2::new(u.y, -u.x);
-                if n == Vec2::ZERO {
-                    continue;
-                }
-                // The largest value over all eight corners, so that the
-                // half-plane holds the hull whatever the rounding.
-                let reach = all
-                    .iter()
-                    .map(|c| n.dot(*c))
-                    .fold(f32::NEG_INFINITY, f32::max);
-                debug_assert!(count < PLANE_LANES, "two joining edges per projection");
-                let offset = reach + margin * (n.x.abs() + n.y.abs());
-                shaft.set_plane(count, (i, n.x), (j, n.y), offset);
-                count += 1;
-            }
-        }
-        shaft
-    }
-
-    /// Whether the box `b` may meet the shaft: `false` only when it lies
-    /// outside the bounding box or wholly beyond one plane.
-    #[inline]
-    pub fn meets(&self, b: &BvhAabb) -> bool {
-        if (b.min.cmpgt(self.max) | b.max.cmplt(self.min)).any() {
-            return false;
-        }
-        // The smallest `normal . x` over the box, per plane: each term's
-        // smaller value over the box's extent along its axis.
-        let (lo, hi) = (b.min, b.max);
-        (0..PLANE_LANES / 4).all(|h| {
-            let [x, y, z] = [self.normal[0][h], self.normal[1][h], self.normal[2][h]];
-            let least =
-                (x * lo.x).min(x * hi.x) + (y * lo.y).min(y * hi.y) + (z * lo.z).min(z * hi.z);
-            !least.cmpgt(self.offset[h]).any()
-        })
-    }
-}
-
-/// The lines through the point `q` and the silhouette corners of the
-/// rectangle `[lo, hi]`, in each projection along an axis (lane `k` of
-/// each vector holds the projection's axes `(i, j)` of [`PAIR_AXES`]; lane
-/// 3 is unused): as `[n_i, n_j, offset]`, the rectangle and `q` in
-/// `n . x <= offset`, pushed out by `margin` in the 1-norm of `n` (the dot
-/// product's rounding scales alike).
-/// A silhouette corner lies between a side of the rectangle turned towards
-/// `q` (`q` strictly beyond it) and one turned away: with `q` beyond one
-/// pair of sides, the two corners of the near side; beyond both, the two
-/// corners off the diagonal through the nearest corner. The offset is the
-/// largest value over `q` and the four corners of the stored normal's dot
-/// product, so that the half-plane holds the whole projected hull whatever
-/// the normal's rounding. A missing line (`q` inside the rectangle's
-/// extent on both axes, or on a corner) is `[0, 0, inf]`, which holds
-/// every point.
-///
-/// Returned as the two lines' `(n_i, n_j, offset)`, lane by lane: every
-/// lane does the operations of one projection's line in the same order,
-/// without a branch (the cases picked by comparisons were mispredicted
-/// often).
-#[inline(always)]
-fn silhouettes(q: [Vec4; 2], lo: [Vec4; 2], hi: [Vec4; 2], margin: f32) -> [[Vec4; 3]; 2] {
-    let below = [q[0].cmplt(lo[0]), q[1].cmplt(lo[1])];
-    let beyond = [below[0] | q[0].cmpgt(hi[0]), below[1] | q[1].cmpgt(hi[1])];
-    let near = |k: usize| Vec4::select(below[k], lo[k], hi[k]);
-    let far = |k: usize| Vec4::select(below[k], hi[k], lo[k]);
-    // Beyond one pair of sides, the two corners of the near side; beyond
-    // both, the two corners off the diagonal through the nearest corner.
-    let corners = [
-        [
-            Vec4::select(beyond[0], near(0), lo[0]),
-            Vec4::select(beyond[1], Vec4::select(beyond[0], far(1), near(1)), lo[1]),
-        ],
-        [
-            Vec4::select(beyond[0], Vec4::select(beyond[1], far(0), near(0)), hi[0]),
-            Vec4::select(beyond[1], near(1), hi[1]),
-        ],
-    ];
-    let centre = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
-    let some = beyond[0] | beyond[1];
-    corners.map(|c| {
-        // A normal of the line through q and c (of any length: the
-        // half-plane, its margin and the box test scale alike).
-        let (n_i, n_j) = (c[1] - q[1], q[0] - c[0]);
-        // No line where q is inside the rectangle's extent on both axes or
-        // on the corner.
-        let line = some & !(n_i.cmpeq(Vec4::ZERO) & n_j.cmpeq(Vec4::ZERO));
-        // The rectangle's side is the inside.
-        let flip = (n_i * (centre[0] - q[0]) + n_j * (centre[1] - q[1])).cmpgt(Vec4::ZERO);
-        let (n_i, n_j) = (Vec4::select(flip, -n_i, n_i), Vec4::select(flip, -n_j, n_j));
-        let dot = |x: Vec4, y: Vec4| n_i * x + n_j * y;
-        // The rectangle's largest value is at the corner that takes, per
-        // axis, the maximum where the normal's component is positive, else
-        // the minimum: rounding is monotone, so that corner's computed dot
-        // product is the largest of the four computed ones too.
-        let support = dot(
-            Vec4::select(n_i.cmpgt(Vec4::ZERO), hi[0], lo[0]),
-            Vec4::select(n_j.cmpgt(Vec4::ZERO), hi[1], lo[1]),
-        );
-        let q_dot = dot(q[0], q[1]);
-        let reach = Vec4::select(q_dot.cmpgt(support), q_dot, support);
-        let offset = reach + margin * (n_i.abs() + n_j.abs());
-        [
-            Vec4::select(line, n_i, Vec4::ZERO),
-            Vec4::select(line, n_j, Vec4::ZERO),
-            Vec4::select(line, offset, Vec4::INFINITY),
-        ]
-    })
-}
-
 /// Up to four segments from one point, set up for slab tests four at a time:
 /// lane `k` is the segment of [`Segment::new`] to the `k`-th end (the last
 /// end fills the lanes beyond the ends).
@@ -1290,34 +1053,6 @@ impl Fan {
             (near.cmple(far) & far.cmpge(Vec4::ZERO) & near.cmple(Vec4::ONE)).all()
         })
     }
-}
-
-/// The edges of the convex hull of `points` (each tagged), counter-clockwise
-/// (Andrew's monotone chain; collinear points dropped).
-fn hull(points: &mut [(Vec2, bool)]) -> Vec<((Vec2, bool), (Vec2, bool))> {
-    points.sort_by(|a, b| a.0.x.total_cmp(&b.0.x).then(a.0.y.total_cmp(&b.0.y)));
-    let cross = |o: Vec2, a: Vec2, b: Vec2| (a - o).perp_dot(b - o);
-    let mut chain: Vec<(Vec2, bool)> = Vec::with_capacity(2 * points.len());
-    for pass in 0..2 {
-        let start = chain.len();
-        let ordered: Box<dyn Iterator<Item = &(Vec2, bool)>> = if pass == 0 {
-            Box::new(points.iter())
-        } else {
-            Box::new(points.iter().rev())
-        };
-        for &p in ordered {
-            while chain.len() >= start + 2
-                && cross(chain[chain.len() - 2].0, chain[chain.len() - 1].0, p.0) <= 0.0
-            {
-                chain.pop();
-            }
-            chain.push(p);
-        }
-        chain.pop(); // the last point starts the other half
-    }
-    (0..chain.len())
-        .map(|k| (chain[k], chain[(k + 1) % chain.len()]))
-        .collect()
 }
 
 #[cfg(test)]

@@ -226,6 +226,12 @@ fn sample_sweep<L: LightSampler, S: Shader, V: Visibility>(
 /// Prints a scene's heading and its tree's size and build time.
 pub fn print_header(scene: &Scene, tree: &LightTree, build: Duration) {
     println!("## Scene `{}`: {}", scene.name, scene.description);
+    print_tree(tree, build);
+}
+
+/// Prints the tree's line of a scene's header: nodes, depth, build time
+/// and memory.
+pub fn print_tree(tree: &LightTree, build: Duration) {
     println!(
         "  tree: {} nodes, depth {}, built in {:.1} ms ({:.0} ns/light), {:.1} bytes/light",
         tree.nodes().len(),

@@ -1,0 +1,400 @@
+//! [`Shadows`]: one thread's host over shared [`Occluders`].
+
+use glam::{DVec3, Vec3};
+use manylights::{Aabb, Coverage, NodeRegion, PointGroup, Visibility};
+use obvhs::aabb::Aabb as BvhAabb;
+
+use crate::bvh::{Segment, distinct_corners};
+use crate::occluders::{BLOCKER_REACH, MARGIN_ULPS, NO_PARTNER, Occluders, Prim};
+use crate::shaft::Shaft;
+use crate::triangle::{blocks, clears};
+
+/// Occluders tried as the single blocker of a node: the first few that the
+/// shadow ray between the centres of the apex's box and the node's box
+/// hits (one that does not cannot block every segment), in the BVH's
+/// traversal order, a quad counted once. A blocker of a whole node is
+/// nearly always among them, and a long segment through foliage meets many
+/// occluders that cannot be one.
+pub const BLOCKER_CANDIDATES: usize = 4;
+
+/// Occluders a batch of shadow rays from one point
+/// ([`visible_lights`](Visibility::visible_lights)) gathers at most: past
+/// this many in the shaft from the point to the lights' box, the rays
+/// traverse the BVH one by one instead. A leaf's lights lie close
+/// together, so their shaft is narrow and usually meets a few occluders,
+/// which each ray then tests directly (a slab test and, for a triangle,
+/// the segment test) instead of descending the BVH again; a wide shaft
+/// through many occluders would make every ray test all of them.
+pub const BATCH_CANDIDATES_MAX: usize = 64;
+
+/// The visibility host of one thread over shared [`Occluders`]: a
+/// conservative shaft classifier and any-hit shadow rays, with counters of
+/// the work asked of it. Make one per thread (or per batch call) with
+/// [`Occluders::host`]; it serves any shading point, with any normal.
+///
+/// # Shadow rays
+///
+/// [`visible`](Visibility::visible) is an any-hit query of the segment from
+/// the shading point to the light through the BVH, which ignores what it
+/// meets closer than the *offset* ([`Occluders::offset`]) to the shading
+/// point, measured along the segment: the surface the point lies on, and
+/// any other within the offset, as a renderer's `t_min` does. Triangles are
+/// tested with the watertight `f64` test of the crate's triangle
+/// predicates (see "Rounding" in the [crate documentation](crate)), boxes
+/// (solid) with an `f32` slab test. This test *is* the visibility `V_i` of
+/// the model: [`Shading::exact_query`](manylights::Shading::exact_query)
+/// with this host sums it, and every classification is conservative with
+/// respect to it.
+///
+/// # Classification
+///
+/// [`classify`](Visibility::classify) asks about every segment from the
+/// shading point to the node's box; [`classify_group`](Visibility::classify_group)
+/// about every segment from a point of the group's box to a point of the
+/// node's box. Both go the same way, after Haines and Wallace 1994:
+///
+/// * [`Coverage::Occluded`] when one occluder blocks every such segment:
+///   a box that, shrunk by the margin, meets the segments between the
+///   corners of the two boxes (the points from which every segment to a
+///   box meets a convex occluder form a convex set, and so do the targets
+///   seen through it from one point, so the corners decide), at least twice
+///   the offset plus the margin away from the apex's box; or a triangle,
+///   or a quad of two, whose predicates clear their slack at every pair of
+///   corners (see `triangle`'s rounding note in the crate documentation),
+///   crossed at least the offset from the apex. Only the first
+///   [`BLOCKER_CANDIDATES`] occluders that the shadow ray between the two
+///   boxes' centres hits are tried.
+/// * [`Coverage::Partial`] when a shadow ray between the two centres is
+///   blocked.
+/// * [`Coverage::Visible`] when no occluder's box (a triangle's grown by
+///   [`RAY_BOX_ULPS`](crate::RAY_BOX_ULPS)) meets the shaft of the two
+///   boxes grown by the margin, every segment's slab tests then missing
+///   every occluder; or when each triangle whose box meets it is one that
+///   every segment leaves behind within the offset (the surface the
+///   shading point, or the group, lies on: the segments start on its plane
+///   and the node lies clear of that plane on one side), so that no
+///   segment's test can hit it past the offset. [`Coverage::Partial`]
+///   otherwise.
+///
+/// The margin is [`MARGIN_ULPS`]` f32::EPSILON` times the largest
+/// coordinate involved. A triangle is tried as a blocker only while the
+/// apex and the node lie within [`BLOCKER_REACH`]
+/// times the occluders' largest coordinate ([`Occluders::scale`]), where
+/// the growth of its box covers the slab test's rounding.
+///
+/// # Batches of shadow rays
+///
+/// [`visible_lights`](Visibility::visible_lights) (the lights of a leaf
+/// from one point) first gathers, into the host's own scratch list, the
+/// occluders whose boxes meet the shaft from the point to the lights' box
+/// grown by the margin: as for a [`Coverage::Visible`] answer, no other
+/// occluder's slab test can meet any of the segments. Each segment then
+/// runs the shadow ray's own tests against the gathered occluders only, so
+/// every answer is the one [`visible`](Visibility::visible) gives. Past
+/// [`BATCH_CANDIDATES_MAX`] occluders the rays are cast one by one.
+#[derive(Clone, Debug)]
+pub struct Shadows<'o> {
+    occluders: &'o Occluders,
+    /// Classifications answered: visible, occluded, partial.
+    pub answers: [u64; 3],
+    /// Shadow rays cast (one per light asked about, batched or not).
+    pub rays: u64,
+    /// Of [`rays`](Self::rays), those answered in batches against gathered
+    /// occluders (see "Batches of shadow rays").
+    pub batched: u64,
+    /// The occluders' slots a batch of shadow rays tests: scratch space,
+    /// kept between calls so that a warmed host allocates nothing.
+    candidates: Vec<u32>,
+}
+
+impl<'o> Shadows<'o> {
+    /// A host over `occluders` (see [`Occluders::host`]).
+    pub fn new(occluders: &'o Occluders) -> Self {
+        Self {
+            occluders,
+            answers: [0; 3],
+            rays: 0,
+            batched: 0,
+            candidates: Vec::new(),
+        }
+    }
+
+    /// The occluders this host tests.
+    pub fn occluders(&self) -> &'o Occluders {
+        self.occluders
+    }
+
+    /// Classifications answered.
+    pub fn classifications(&self) -> u64 {
+        self.answers.iter().sum()
+    }
+
+    /// Classifies every segment from a point of `from` (a point, as a box of
+    /// one point, or a group of points) to a point of `target`: see the
+    /// type's documentation, "Classification".
+    pub fn classify_boxes(&mut self, from: &Aabb, target: &Aabb) -> Coverage {
+        let coverage = self.classification(from, target);
+        self.answers[coverage as usize] += 1;
+        coverage
+    }
+
+    /// The classifier's margin for segments between `from` and `target`
+    /// ([`MARGIN_ULPS`]` f32::EPSILON` of the largest coordinate involved,
+    /// the occluders' included) and that coordinate; `None` when one is not
+    /// finite.
+    fn margin(&self, from: &Aabb, target: &Aabb) -> Option<(f32, f32)> {
+        let magnitude = [from.min, from.max, target.min, target.max]
+            .iter()
+            .fold(self.occluders.scale, |m, p| m.max(p.abs().max_element()));
+        magnitude
+            .is_finite()
+            .then_some((MARGIN_ULPS * f32::EPSILON * magnitude, magnitude))
+    }
+
+    /// Gathers into `self.candidates` the slots of the occluders whose boxes
+    /// meet the shaft from `point` to `target` grown by the margin (every
+    /// occluder a segment's slab test may meet); `false` if there are more
+    /// than [`BATCH_CANDIDATES_MAX`] of them, or a coordinate is not finite.
+    fn gather(&mut self, point: Vec3, target: &Aabb) -> bool {
+        let occ = self.occluders;
+        self.candidates.clear();
+        let from = Aabb {
+            min: point,
+            max: point,
+        };
+        let Some((margin, _)) = self.margin(&from, target) else {
+            return false;
+        };
+        let shaft = Shaft::new(point, target, margin);
+        let candidates = &mut self.candidates;
+        let crowded = occ.bvh.any_in(
+            |b| shaft.meets(b),
+            |slot| {
+                if shaft.meets(&occ.bounds[slot]) {
+                    candidates.push(slot as u32);
+                }
+                candidates.len() > BATCH_CANDIDATES_MAX
+            },
+        );
+        !crowded
+    }
+
+    fn classification(&self, from: &Aabb, target: &Aabb) -> Coverage {
+        let occ = self.occluders;
+        if occ.is_empty() {
+            return Coverage::Visible;
+        }
+        let Some((margin, magnitude)) = self.margin(from, target) else {
+            return Coverage::Partial;
+        };
+        let (centre, middle) = (centre(from), centre(target));
+        let (occluded, centre_blocked) =
+            self.single_blocker(from, target, centre, middle, margin, magnitude);
+        if occluded {
+            return Coverage::Occluded;
+        }
+        if centre_blocked {
+            return Coverage::Partial;
+        }
+        let shaft = if from.min == from.max {
+            Shaft::new(from.min, target, margin)
+        } else {
+            Shaft::between(from, target, margin)
+        };
+        // Triangles that every segment leaves behind within the offset (the
+        // surface the apex lies on) cannot block one.
+        let t_min_bound = (f64::from(occ.offset) / box_reach(from, target)).min(1.0);
+        let m = 2.0 * f64::from(magnitude);
+        let blocks_some = |slot: usize| {
+            shaft.meets(&occ.bounds[slot])
+                && match &occ.prims[slot] {
+                    Prim::Box => true,
+                    Prim::Triangle { v, .. } => !clears(v, from, target, t_min_bound, m),
+                }
+        };
+        if occ.bvh.any_in(|b| shaft.meets(b), blocks_some) {
+            Coverage::Partial
+        } else {
+            Coverage::Visible
+        }
+    }
+
+    /// Whether one of the first [`BLOCKER_CANDIDATES`] occluders along the
+    /// segment from `centre` to `middle` blocks every segment from `from`
+    /// to `target`, and whether the shadow ray from `centre` to `middle` is
+    /// blocked.
+    fn single_blocker(
+        &self,
+        from: &Aabb,
+        target: &Aabb,
+        centre: Vec3,
+        middle: Vec3,
+        margin: f32,
+        magnitude: f32,
+    ) -> (bool, bool) {
+        let occ = self.occluders;
+        let between = Segment::new(centre, middle);
+        let length = (middle.as_dvec3() - centre.as_dvec3()).length();
+        let t_min = if length > 0.0 {
+            f64::from(occ.offset) / length
+        } else {
+            f64::INFINITY
+        };
+        let gap = box_distance(from, target);
+        // Triangles block only within the occluders' range (see the type's
+        // documentation); and never a node the apex's box touches.
+        let within = magnitude <= BLOCKER_REACH * occ.scale;
+        let m = 2.0 * f64::from(magnitude);
+        let (mut tried, mut occluded, mut centre_blocked) = (0, false, false);
+        let mut last = NO_PARTNER;
+        occ.bvh.any_along(&between, |slot| {
+            let b = &occ.bounds[slot];
+            // An occluder that blocks every segment blocks the one between
+            // the centres: only those are tried, and a quad once.
+            if !occ.hits(slot, &between, centre, middle, t_min) {
+                return false;
+            }
+            centre_blocked = true;
+            if let Prim::Triangle { partner, .. } = occ.prims[slot]
+                && partner == last
+                && partner != NO_PARTNER
+            {
+                return false;
+            }
+            last = slot as u32;
+            tried += 1;
+            occluded = match occ.prims[slot] {
+                Prim::Box => box_blocks(b, from, target, margin, occ.offset),
+                Prim::Triangle { v, partner, shared } => {
+                    within
+                        && gap > 0.0
+                        && if partner == NO_PARTNER {
+                            blocks(
+                                &[v],
+                                &[[true; 3]],
+                                from,
+                                target,
+                                f64::from(occ.offset) / gap,
+                                m,
+                            )
+                        } else {
+                            let Prim::Triangle {
+                                v: w,
+                                shared: other,
+                                ..
+                            } = occ.prims[partner as usize]
+                            else {
+                                unreachable!("a partner is a triangle")
+                            };
+                            blocks(
+                                &[v, w],
+                                &[shared.map(|s| !s), other.map(|s| !s)],
+                                from,
+                                target,
+                                f64::from(occ.offset) / gap,
+                                m,
+                            )
+                        }
+                }
+            };
+            occluded || tried == BLOCKER_CANDIDATES
+        });
+        (occluded, centre_blocked)
+    }
+}
+
+/// Whether the box occluder `b`, shrunk by `margin`, meets every segment
+/// between the corners of `from` and of `target`, and lies at least twice
+/// `offset` plus `margin` away from `from` (so that every segment meets it
+/// past the offset).
+fn box_blocks(b: &BvhAabb, from: &Aabb, target: &Aabb, margin: f32, offset: f32) -> bool {
+    let core = BvhAabb::new(b.min + margin, b.max - margin);
+    if !core.valid() {
+        return false;
+    }
+    let clear = 2.0 * offset + margin;
+    let away = Aabb {
+        min: from.min - clear,
+        max: from.max + clear,
+    };
+    let touching = away.min.cmple(b.max.into()).all() && Vec3::from(b.min).cmple(away.max).all();
+    if touching {
+        return false;
+    }
+    let ends = distinct_corners(target);
+    distinct_corners(from).all(|p| ends.clone().all(|q| Segment::new(p, q).hits(&core)))
+}
+
+/// The centre of a box.
+fn centre(b: &Aabb) -> Vec3 {
+    0.5 * (b.min + b.max)
+}
+
+/// An upper bound on the length of a segment between two boxes (the
+/// distance between farthest corners), in `f64`, grown by a relative
+/// `2^-40` for its rounding.
+fn box_reach(a: &Aabb, b: &Aabb) -> f64 {
+    let (lo, hi) = (a.min.min(b.min).as_dvec3(), a.max.max(b.max).as_dvec3());
+    (hi - lo).length() * (1.0 + 1.0 / (1u64 << 40) as f64)
+}
+
+/// A lower bound on the distance between two boxes, in `f64` (0 when they
+/// touch), shrunk by a relative `2^-40` for its rounding.
+fn box_distance(a: &Aabb, b: &Aabb) -> f64 {
+    let gap = (b.min.as_dvec3() - a.max.as_dvec3())
+        .max(a.min.as_dvec3() - b.max.as_dvec3())
+        .max(DVec3::ZERO);
+    gap.length() * (1.0 - 1.0 / (1u64 << 40) as f64)
+}
+
+impl Visibility for Shadows<'_> {
+    const CLASSIFIES_GROUPS: bool = true;
+
+    /// [`Shadows::classify_boxes`] from the point.
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
+        let from = Aabb {
+            min: point,
+            max: point,
+        };
+        self.classify_boxes(&from, &node.aabb)
+    }
+
+    /// [`Shadows::classify_boxes`] from the group's box.
+    fn classify_group(&mut self, group: &PointGroup, node: &NodeRegion) -> Coverage {
+        self.classify_boxes(&group.aabb, &node.aabb)
+    }
+
+    /// One any-hit shadow ray ([`Occluders::blocked`]).
+    fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
+        self.rays += 1;
+        !self.occluders.blocked(point, light)
+    }
+
+    /// The shadow rays of [`visible`](Visibility::visible) against the
+    /// occluders gathered once for all of them (see the type's
+    /// documentation, "Batches of shadow rays"): the same answers.
+    fn visible_lights(&mut self, point: Vec3, lights: &[Vec3], seen: &mut [bool]) {
+        let occ = self.occluders;
+        let target = lights.iter().fold(
+            Aabb {
+                min: Vec3::INFINITY,
+                max: Vec3::NEG_INFINITY,
+            },
+            |b, &l| Aabb {
+                min: b.min.min(l),
+                max: b.max.max(l),
+            },
+        );
+        if occ.is_empty() || lights.len() < 2 || !self.gather(point, &target) {
+            for (&light, seen) in lights.iter().zip(seen) {
+                *seen = self.visible(point, light);
+            }
+            return;
+        }
+        self.rays += lights.len() as u64;
+        self.batched += lights.len() as u64;
+        for (&light, seen) in lights.iter().zip(seen) {
+            *seen = !occ.blocked_by(&self.candidates, point, light);
+        }
+    }
+}
