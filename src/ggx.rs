@@ -73,7 +73,11 @@
 //!   never below 0 (only lights above the plane count).
 //! * **`c = v.h`**: `|l + v|^2 = 2 (1 + v.l)` and `h = (l + v) / |l + v|`
 //!   give `v.h = |l + v| / 2 = sqrt((1 + v.l) / 2)`, increasing in `v.l`,
-//!   whose range is the cone's cosine interval to `v`. Also `|l + v| >=
+//!   whose range is the cone's cosine interval to `v`: `v.l >= cos(theta_v
+//!   + delta)` while `theta_v + delta <= pi` (`theta_v` the angle between
+//!   `v` and the axis), and `v.l >= -1` otherwise, where the cone holds
+//!   `-v` (its sine, `sin theta_v cos delta + cos theta_v sin delta`, is
+//!   then negative: the sum-of-angles value has wrapped past `pi`). Also `|l + v| >=
 //!   n.(l + v) = a + b`, so `c >= (a_lo + b) / 2`.
 //! * **`s = sin theta_h`**, from two facts, intersected:
 //!   1. *The half-vector cone.* Every member direction `l` is within the
@@ -390,6 +394,12 @@ impl Ggx {
 
         // c = v.h = sqrt((1 + v.l) / 2) >= (a + b) / 2, true values.
         let (vl_lo, vl_hi) = cone.cos_range(v);
+        // `cos_range`'s lower end is `cos(theta_c + delta)`, which is not
+        // the minimum once `theta_c + delta > pi` (then `sin(theta_c +
+        // delta) < 0`): there the cone reaches `-v` and the minimum is -1.
+        let (cos_c, sin_c) = (v.dot(cone.axis), v.cross(cone.axis).length());
+        let past_pi = sin_c * cone.cos_half_angle + cos_c * cone.sin_half_angle <= DIRECTION_SLACK;
+        let vl_lo = if past_pi { -1.0 } else { vl_lo };
         let half_root = |x: f64| (0.5 * (1.0 + x)).max(0.0).sqrt();
         let c_lo = (half_root(vl_lo - DIRECTION_SLACK) * (1.0 - OP_SLACK))
             .max(0.5 * (a_lo + b) * (1.0 - OP_SLACK));
@@ -451,6 +461,9 @@ impl Ggx {
         let c_lo = (c_lo - DIRECTION_SLACK).max(0.0);
         let c_hi = (c_hi + DIRECTION_SLACK).min(1.0);
 
+        if std::env::var("GGX_DEBUG").is_ok() && node.light_count() == 19 {
+            eprintln!("RANGE a [{a_lo}, {a_hi}] c [{c_lo}, {c_hi}] s [{s_lo}, {s_hi}] h_min {h_min} nv {b} vl [{vl_lo}, {vl_hi}] cone a [{cone_lo}, {cone_hi}] z [{z_lo}, {z_hi}] near {near} far {far}");
+        }
         let f_hi = self.fresnel(c_lo)
             * (self.distribution(s_lo * s_lo) * self.visibility(view, a_lo))
             * (1.0 + PRODUCT_SLACK);

@@ -206,6 +206,47 @@ proptest! {
         check_point(&mut shading, &query(p, Vec3::Z, v), t)?;
     }
 
+    /// Every node's interval (with a cone) holds the sum of its lights'
+    /// terms, and its estimate lies in it: the bound itself, without the
+    /// cut, alone and through the eight-wide `bound_nodes`; lights
+    /// grazing the plane of normal `+z`, views grazing it too.
+    #[test]
+    fn every_node_bound_holds(
+        (p, light_set) in vec_in(8.0).prop_flat_map(|p| (Just(p), grazing_lights(p))),
+        (n, v) in prop_oneof![
+            normal_and_view(),
+            view_for(Vec3::Z).prop_map(|v| (Vec3::Z, v)),
+        ],
+        f0 in colour(),
+        alpha in roughness(),
+    ) {
+        let tree = LightTree::build(&light_set).unwrap();
+        let ggx = Ggx::new(f0, alpha);
+        let q = query(p, n, v);
+        let surface = q.surface();
+        let at = ggx.prepare(surface);
+        let nodes: Vec<_> = tree.nodes().iter().filter_map(|node| Some((node, node.cone(surface.point)?))).collect();
+        let mut together = vec![manylights::shader::NodeEstimate::ZERO; nodes.len()];
+        let refs: Vec<_> = nodes.iter().map(|(node, _)| *node).collect();
+        let cones: Vec<_> = nodes.iter().map(|(_, cone)| *cone).collect();
+        ggx.bound_nodes(&at, surface, &refs, &cones, &mut together);
+        for ((node, cone), joint) in nodes.iter().zip(&together) {
+            let exact: DVec3 = tree.lights()[node.lights()]
+                .iter()
+                .map(|l| ggx.eval(&at, surface, l.position.as_dvec3(), l.intensity.as_dvec3()))
+                .sum();
+            let b = ggx.bound(&at, surface, node, cone);
+            prop_assert_eq!(&b, joint);
+            let slack = exact * ShadeResult::ROUNDING_ALLOWANCE;
+            prop_assert!(
+                b.lower.cmple(exact + slack).all() && (exact - slack).cmple(b.upper).all(),
+                "{} outside [{}, {}] ({} lights)", exact, b.lower, b.upper, node.light_count()
+            );
+            prop_assert!(b.lower.cmple(b.estimate).all() && b.estimate.cmple(b.upper).all());
+            prop_assert!(b.lower.min_element() >= 0.0 && b.upper.is_finite());
+        }
+    }
+
     /// The specular criterion refines every node whose upper bound exceeds
     /// it, as for Phong: no settled node's bound exceeds it.
     #[test]
