@@ -66,7 +66,10 @@ impl Hit {
         } else {
             ASPHALT_ALPHA
         };
-        Combined::new(Lambert::new(ASPHALT), Ggx::new(Vec3::splat(WATER_F0), alpha))
+        Combined::new(
+            Lambert::new(ASPHALT),
+            Ggx::new(Vec3::splat(WATER_F0), alpha),
+        )
     }
 }
 

@@ -73,12 +73,12 @@
 //!   never below 0 (only lights above the plane count).
 //! * **`c = v.h`**: `|l + v|^2 = 2 (1 + v.l)` and `h = (l + v) / |l + v|`
 //!   give `v.h = |l + v| / 2 = sqrt((1 + v.l) / 2)`, increasing in `v.l`,
-//!   whose range is the cone's cosine interval to `v`: `v.l >= cos(theta_v
-//!   + delta)` while `theta_v + delta <= pi` (`theta_v` the angle between
-//!   `v` and the axis), and `v.l >= -1` otherwise, where the cone holds
-//!   `-v` (its sine, `sin theta_v cos delta + cos theta_v sin delta`, is
-//!   then negative: the sum-of-angles value has wrapped past `pi`). Also `|l + v| >=
-//!   n.(l + v) = a + b`, so `c >= (a_lo + b) / 2`.
+//!   whose range is the cone's cosine interval to `v`: `v.l >=
+//!   cos(theta_v + delta)` while `theta_v + delta <= pi` (`theta_v` the
+//!   angle between `v` and the axis), and `v.l >= -1` otherwise, where the
+//!   cone holds `-v` (its sine, `sin theta_v cos delta + cos theta_v sin
+//!   delta`, is then negative: the sum-of-angles value has wrapped past
+//!   `pi`). Also `|l + v| >= n.(l + v) = a + b`, so `c >= (a_lo + b) / 2`.
 //! * **`s = sin theta_h`**, from two facts, intersected:
 //!   1. *The half-vector cone.* Every member direction `l` is within the
 //!      cone's half-angle `delta` of its axis `l_c` (`sin delta = R/D`), so
@@ -288,13 +288,22 @@ impl Ggx {
             (Self::MIN_ALPHA..=Self::MAX_ALPHA).contains(&a),
             "Ggx roughness must lie in [1e-3, 1], got {a} (use try_new for an error)"
         );
-        let channel = |x: f32| if x.is_nan() { 0.0 } else { f64::from(x.clamp(0.0, 1.0)) };
+        let channel = |x: f32| {
+            if x.is_nan() {
+                0.0
+            } else {
+                f64::from(x.clamp(0.0, 1.0))
+            }
+        };
         let alpha = if a.is_nan() {
             Self::MAX_ALPHA
         } else {
             a.clamp(Self::MIN_ALPHA, Self::MAX_ALPHA)
         };
-        Self::from_parts(DVec3::new(channel(f0.x), channel(f0.y), channel(f0.z)), alpha)
+        Self::from_parts(
+            DVec3::new(channel(f0.x), channel(f0.y), channel(f0.z)),
+            alpha,
+        )
     }
 
     /// Like [`Ggx::new`], but refuses bad parameters.
@@ -462,7 +471,9 @@ impl Ggx {
         let c_hi = (c_hi + DIRECTION_SLACK).min(1.0);
 
         if std::env::var("GGX_DEBUG").is_ok() && node.light_count() == 19 {
-            eprintln!("RANGE a [{a_lo}, {a_hi}] c [{c_lo}, {c_hi}] s [{s_lo}, {s_hi}] h_min {h_min} nv {b} vl [{vl_lo}, {vl_hi}] cone a [{cone_lo}, {cone_hi}] z [{z_lo}, {z_hi}] near {near} far {far}");
+            eprintln!(
+                "RANGE a [{a_lo}, {a_hi}] c [{c_lo}, {c_hi}] s [{s_lo}, {s_hi}] h_min {h_min} nv {b} vl [{vl_lo}, {vl_hi}] cone a [{cone_lo}, {cone_hi}] z [{z_lo}, {z_hi}] near {near} far {far}"
+            );
         }
         let f_hi = self.fresnel(c_lo)
             * (self.distribution(s_lo * s_lo) * self.visibility(view, a_lo))
@@ -505,7 +516,10 @@ impl Shader for Ggx {
 
     #[inline]
     fn prepare(&self, surface: &Surface) -> GgxView {
-        let (n, v) = (surface.given_normal.as_dvec3(), surface.given_view.as_dvec3());
+        let (n, v) = (
+            surface.given_normal.as_dvec3(),
+            surface.given_view.as_dvec3(),
+        );
         // Products of two f32 values are exact in f64.
         let mut dot = ExactSum::<3>::new();
         (0..3).for_each(|j| dot.add(n[j] * v[j]));
@@ -586,7 +600,8 @@ impl Shader for Ggx {
             out[..n].fill(NodeEstimate::ZERO);
             return;
         }
-        self.unit.bound_nodes(&(), surface, &nodes[..n], &cones[..n], &mut out[..n]);
+        self.unit
+            .bound_nodes(&(), surface, &nodes[..n], &cones[..n], &mut out[..n]);
         for ((node, cone), out) in nodes.iter().zip(cones).zip(out.iter_mut()) {
             *out = self.product(view, surface, node, cone, out);
         }

@@ -240,7 +240,13 @@ impl SoaLights {
     /// crate's `Ggx` model summed over every light in `f32` lanes, as
     /// [`shade`](Self::shade) sums Lambert and Phong. Zero for a view at
     /// or below the surface.
-    pub fn shade_ggx(&self, material: &GgxMaterial, point: Vec3, normal: Vec3, view: Vec3) -> DVec3 {
+    pub fn shade_ggx(
+        &self,
+        material: &GgxMaterial,
+        point: Vec3,
+        normal: Vec3,
+        view: Vec3,
+    ) -> DVec3 {
         let nv = normal.dot(view);
         if !(nv > 0.0) {
             return DVec3::ZERO;
@@ -308,7 +314,11 @@ fn ggx_chunk(rx: &GgxReceiver, lights: &Chunk, acc: &mut [Lanes; 3]) {
         let d2 = dx * dx + dy * dy + dz * dz;
         let inv_d = if d2 > 0.0 { 1.0 / d2.sqrt() } else { 0.0 };
         let nl = (rx.n.x * dx + rx.n.y * dy + rx.n.z * dz) * inv_d;
-        let (hx, hy, hz) = (dx * inv_d + rx.v.x, dy * inv_d + rx.v.y, dz * inv_d + rx.v.z);
+        let (hx, hy, hz) = (
+            dx * inv_d + rx.v.x,
+            dy * inv_d + rx.v.y,
+            dz * inv_d + rx.v.z,
+        );
         let h2 = hx * hx + hy * hy + hz * hz;
         let cx = rx.n.y * hz - rx.n.z * hy;
         let cy = rx.n.z * hx - rx.n.x * hz;

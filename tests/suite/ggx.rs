@@ -17,7 +17,11 @@ use proptest::prelude::*;
 /// `Lambda` from `tan^2`): a reference written independently of the
 /// crate's forms.
 fn reference(lights: &[PointLight], p: Vec3, n: Vec3, v: Vec3, f0: Vec3, alpha: f32) -> DVec3 {
-    let (p, n, v) = (p.as_dvec3(), n.as_dvec3().normalize(), v.as_dvec3().normalize());
+    let (p, n, v) = (
+        p.as_dvec3(),
+        n.as_dvec3().normalize(),
+        v.as_dvec3().normalize(),
+    );
     let (a, f0) = (f64::from(alpha), f0.as_dvec3());
     let nv = n.dot(v);
     if nv <= 0.0 {
@@ -116,7 +120,9 @@ fn check_point<S: Shader>(
     check_bound(&r, exact)?;
     check_threshold(&r, &t)?;
 
-    let zero = shading.shade_query(q, Threshold::zero(), Unoccluded).unwrap();
+    let zero = shading
+        .shade_query(q, Threshold::zero(), Unoccluded)
+        .unwrap();
     prop_assert_eq!(zero.stop, Stop::ThresholdMet);
     for k in 0..3 {
         prop_assert!(
@@ -276,7 +282,10 @@ fn lamps(side: usize) -> Vec<PointLight> {
     for i in 0..side {
         for j in 0..side {
             let (x, y) = (-50.0 + step * i as f32, -50.0 + step * j as f32);
-            lights.push(PointLight::new(Vec3::new(x, y, 6.0), Vec3::new(1.0, 0.8, 0.6)));
+            lights.push(PointLight::new(
+                Vec3::new(x, y, 6.0),
+                Vec3::new(1.0, 0.8, 0.6),
+            ));
         }
     }
     lights
@@ -345,7 +354,14 @@ fn view_grazing_at_one_in_a_million() {
         let q = query(Vec3::ZERO, Vec3::Z, v);
         let alone = LightTree::build(&[mirror]).unwrap();
         let peak = alone.shading(ggx).exact_query(&q, Unoccluded);
-        let theirs = reference(&[mirror], Vec3::ZERO, Vec3::Z, v, Vec3::new(0.9, 0.6, 0.3), alpha);
+        let theirs = reference(
+            &[mirror],
+            Vec3::ZERO,
+            Vec3::Z,
+            v,
+            Vec3::new(0.9, 0.6, 0.3),
+            alpha,
+        );
         assert!(peak.is_finite() && peak.min_element() > 0.0, "{peak}");
         assert!(agrees(peak, theirs), "alpha {alpha}: {peak} vs {theirs}");
 
@@ -360,7 +376,10 @@ fn view_grazing_at_one_in_a_million() {
             Threshold::zero(),
         ] {
             let r = shading.shade_query(&q, t, Unoccluded).unwrap();
-            assert!(r.certifies(exact), "alpha {alpha} {t:?}: {r:?} against {exact}");
+            assert!(
+                r.certifies(exact),
+                "alpha {alpha} {t:?}: {r:?} against {exact}"
+            );
             assert!(r.radiance.is_finite() && !r.error_bound.is_nan());
         }
     }
@@ -380,14 +399,20 @@ fn lights_and_eyes_behind_the_surface_contribute_nothing() {
     let mut shading = tree.shading(Ggx::new(Vec3::ONE, 0.3));
     let q = query(Vec3::ZERO, Vec3::Z, Vec3::new(0.2, 0.1, 1.0));
     assert_eq!(shading.exact_query(&q, Unoccluded), DVec3::ZERO);
-    let r = shading.shade_query(&q, Threshold::relative(0.01), Unoccluded).unwrap();
+    let r = shading
+        .shade_query(&q, Threshold::relative(0.01), Unoccluded)
+        .unwrap();
     assert_eq!((r.radiance, r.error_bound), (DVec3::ZERO, DVec3::ZERO));
 
     // More lights than a small scene, which is summed whole.
     let lights = lamps(40);
     let tree = LightTree::build(&lights).unwrap();
     let mut shading = tree.shading(Ggx::new(Vec3::ONE, 0.3));
-    for v in [Vec3::new(1.0, 0.0, -0.5), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -1.0)] {
+    for v in [
+        Vec3::new(1.0, 0.0, -0.5),
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -1.0),
+    ] {
         // Outside the root's ball, so that the root has a bound.
         let q = query(Vec3::new(200.0, 300.0, 0.0), Vec3::Z, v);
         assert_eq!(shading.exact_query(&q, Unoccluded), DVec3::ZERO);
@@ -409,10 +434,17 @@ fn bad_parameters_are_refused() {
     for alpha in [0.0, 1e-4, 1.5, -0.1, f32::NAN, f32::INFINITY] {
         assert!(refused(Vec3::splat(0.04), alpha), "alpha {alpha}");
     }
-    for f0 in [Vec3::new(1.1, 0.0, 0.0), Vec3::new(0.0, -0.1, 0.0), Vec3::new(0.0, 0.0, f32::NAN)] {
+    for f0 in [
+        Vec3::new(1.1, 0.0, 0.0),
+        Vec3::new(0.0, -0.1, 0.0),
+        Vec3::new(0.0, 0.0, f32::NAN),
+    ] {
         assert!(refused(f0, 0.1), "F0 {f0}");
     }
     let ok = Ggx::try_new(Vec3::new(0.0, 0.5, 1.0), 1e-3).unwrap();
-    assert_eq!((ok.alpha(), ok.f0()), (f64::from(1e-3f32), DVec3::new(0.0, 0.5, 1.0)));
+    assert_eq!(
+        (ok.alpha(), ok.f0()),
+        (f64::from(1e-3f32), DVec3::new(0.0, 0.5, 1.0))
+    );
     assert!(Ggx::try_new(Vec3::ONE, 1.0).is_ok());
 }

@@ -15,8 +15,8 @@
 use crate::common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::{DVec3, Vec3};
 use manylights::{
-    Aabb, Coverage, Ggx, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeResult, Stop,
-    Threshold, Unoccluded, Visibility,
+    Aabb, Coverage, Ggx, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeResult,
+    Stop, Threshold, Unoccluded, Visibility,
 };
 use manylights_report::bvh::corners;
 use proptest::prelude::*;
