@@ -116,9 +116,10 @@
 //! outward by [`PRODUCT_SLACK`]. What can cancel is the arguments:
 //!
 //! * each interval of a *true* quantity is rounded outward (the cone's
-//!   cosines by [`COS_SLACK`] plus [`DIRECTION_SLACK`] for the unit
-//!   normal and view themselves, the box heights and distances by their
-//!   own slacks, quotients and square roots by a few ulps);
+//!   cosines by [`COS_SLACK`](crate::numeric::COS_SLACK) plus
+//!   [`DIRECTION_SLACK`] for the unit normal and view themselves, the box
+//!   heights and distances by their own slacks, quotients and square roots
+//!   by a few ulps);
 //! * then each is widened once more to hold the *computed* quantity `eval`
 //!   uses for a light: `n.l` is the exactly signed height over the
 //!   distance, within `2^-40` relative plus a few ulps ([`Lambert`]'s
