@@ -44,7 +44,12 @@
 //! diffuse   L_d = sum_i V_i I_i kd max(0, n.w_i)   / d_i^2          (Lambert)
 //! specular  L_s = sum_i V_i I_i ks max(0, r.w_i)^e / d_i^2,
 //!           r = 2 (n.v) n - v                                       (Phong)
+//! microfacet L_s = sum_i V_i I_i f(w_i, v) max(0, n.w_i) / d_i^2,
+//!           f = D G2 F / (4 (n.w_i)(n.v)), 0 unless n.v > 0        (Ggx)
 //! ```
+//!
+//! ([`Ggx`] states its GGX `D`, height-correlated Smith `G2` and Schlick
+//! `F`.)
 //!
 //! `V_i` is the host's point-to-point visibility (1 without a
 //! [`Visibility`]). The caller's `f32` point, normal, view and light
@@ -137,7 +142,8 @@
 //! * Intensities: finite `f32`, `>= 0` (so up to `3.4e38`); node sums and all
 //!   shading arithmetic are `f64`, so sums of many lights near `f32::MAX`
 //!   neither overflow nor lose the bound.
-//! * Phong exponents `0 ..= 1e6` ([`Phong::MAX_EXPONENT`]).
+//! * Phong exponents `0 ..= 1e6` ([`Phong::MAX_EXPONENT`]); GGX roughness
+//!   `1e-3 ..= 1` and `F0` in `[0, 1]` per channel ([`Ggx`]).
 //! * Results are `f64` ([`glam::DVec3`]). A result is infinite only where the
 //!   model is: never, for finite `f32` inputs, since the closest two distinct
 //!   `f32` points are `1.4e-45` apart and `f32::MAX / (1.4e-45)^2` fits in an
@@ -167,6 +173,7 @@ mod cut;
 mod dispatch;
 mod error;
 mod geometry;
+mod ggx;
 mod lambert;
 mod lanes;
 mod light;
@@ -183,6 +190,7 @@ pub use combined::Combined;
 pub use cut::{ShadeResult, Stop, Target, Threshold};
 pub use error::{BuildError, ShadeError, ValidationError};
 pub use geometry::Aabb;
+pub use ggx::Ggx;
 pub use lambert::{BoundKind, Lambert};
 pub(crate) use light::LightLanes;
 pub use light::PointLight;

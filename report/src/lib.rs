@@ -31,6 +31,7 @@ pub mod config;
 pub mod csv;
 pub mod evaluations;
 pub mod exact;
+pub mod ggx;
 pub mod image;
 pub mod measure;
 pub mod mesh_city;

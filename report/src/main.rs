@@ -9,6 +9,7 @@
 //! cargo run --release -p manylights-report -- shadows         # the occluded scenes alone
 //! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
 //! cargo run --release -p manylights-report -- anatomy         # where a cut's work goes
+//! cargo run --release -p manylights-report -- ggx             # GGX against Phong and the exact sum
 //! ```
 //!
 //! The full report takes about a minute on 2 cores, plus about two minutes
@@ -28,7 +29,9 @@
 //! of these. `anatomy` (where a certified cut's work goes on the street
 //! city at 10^4 to 10^6 lights: refinements, bounded children by depth and
 //! distance, the final entries' errors and how loose their bounds are)
-//! runs only when named.
+//! runs only when named, as does `ggx` (the GGX shader at a certified 1%
+//! on the street city, 10^4 to 10^6 lights, against Phong of the matching
+//! lobe and the vectorized exact GGX sum, [`manylights_report::ggx`]).
 //! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
 //! repository root:
 //!
@@ -62,6 +65,7 @@ use manylights_report::config::{
 };
 use manylights_report::csv::{write_csv, write_scaling_csv};
 use manylights_report::evaluations::print_evaluations_table;
+use manylights_report::ggx::print_ggx;
 use manylights_report::measure::MAX_PASSES;
 use manylights_report::mesh_city::{CITY_MESH, run_city_mesh};
 use manylights_report::occluded::run_occluded;
@@ -77,6 +81,9 @@ const EVALUATIONS: &str = "evaluations";
 const BOUNDS: &str = "bounds";
 /// Where a certified cut's work goes, as a part run only when named.
 const ANATOMY: &str = "anatomy";
+/// The GGX shader against Phong and the exact sum, as a part run only
+/// when named.
+const GGX: &str = "ggx";
 
 fn main() -> Result<(), Box<dyn Error>> {
     let started = Instant::now();
@@ -97,7 +104,8 @@ fn main() -> Result<(), Box<dyn Error>> {
             }
             name if SCENE_NAMES.contains(&name)
                 || OCCLUDED_NAMES.contains(&name)
-                || [EVALUATIONS, BOUNDS, BATCH, SCALING, ANATOMY, CITY_MESH].contains(&name) =>
+                || [EVALUATIONS, BOUNDS, BATCH, SCALING, ANATOMY, CITY_MESH, GGX]
+                    .contains(&name) =>
             {
                 parts.push(arg)
             }
@@ -105,7 +113,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
                      [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {CITY_MESH} | {SHADOWS} | \
-                     {SCALING} | {ANATOMY}]...",
+                     {SCALING} | {ANATOMY} | {GGX}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -138,9 +146,12 @@ fn main() -> Result<(), Box<dyn Error>> {
     }
     if named(ANATOMY) {
         print_anatomy()?;
-        if parts.iter().all(|p| p == ANATOMY) {
-            return Ok(());
-        }
+    }
+    if named(GGX) {
+        print_ggx()?;
+    }
+    if !parts.is_empty() && parts.iter().all(|p| p == ANATOMY || p == GGX) {
+        return Ok(());
     }
     println!("{METHODS}");
     println!(

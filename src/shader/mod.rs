@@ -11,6 +11,7 @@ use glam::{DVec3, Vec3};
 
 use crate::geometry::GroupView;
 pub use crate::geometry::{Cone, Surface};
+pub use crate::ggx::GgxView;
 pub use crate::phong::Mirror;
 pub use crate::tree::Node;
 use crate::{LightLanes, PointLight, ShadeError};

@@ -6,7 +6,7 @@ use crate::common::{cases, check_bound, check_threshold, direction, lights, thre
 use glam::Vec3;
 use manylights::shader::Shader;
 use manylights::{
-    Combined, Coverage, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query,
+    Combined, Coverage, Ggx, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query,
     ShadeError, ShadeResult, Stop, Threshold, Unoccluded, Visibility,
 };
 use proptest::prelude::*;
@@ -206,6 +206,42 @@ proptest! {
         shading.shade_batch(&qs, t, Unoccluded, &mut results).unwrap();
         for (q, r) in qs.iter().zip(&results) {
             check_bound(r, shading.exact_query(q, Unoccluded))?;
+            check_threshold(r, &t)?;
+        }
+    }
+
+    /// GGX beside Lambert in a batch (each point shaded on its own, the
+    /// shader not being diffuse), with and without occluders; roughness
+    /// log-uniform over the whole range.
+    #[test]
+    fn ggx_batches_keep_the_contract(
+        light_set in lights(1000),
+        points in patch(),
+        views in prop::collection::vec(direction(), 150),
+        t in threshold(),
+        alpha in (-3.0f64..=0.0).prop_map(|u| (10f64.powf(u) as f32).clamp(1e-3, 1.0)),
+        f0 in (0.0f32..=1.0, 0.0f32..=1.0, 0.0f32..=1.0),
+        wall in -8.0f32..=8.0,
+    ) {
+        let tree = LightTree::build(&light_set).unwrap();
+        let ggx = Ggx::new(Vec3::new(f0.0, f0.1, f0.2), alpha);
+        let mut shading = tree.shading(Combined::new(Lambert::new(Vec3::splat(0.5)), ggx));
+        let qs: Vec<_> = queries(&points)
+            .into_iter()
+            .zip(&views)
+            .filter_map(|(q, &v)| q.with_view(v).ok())
+            .collect();
+        let mut results = vec![placeholder(); qs.len()];
+        let stats = shading.shade_batch(&qs, t, Unoccluded, &mut results).unwrap();
+        prop_assert_eq!(stats.points_alone as usize, qs.len());
+        for (q, r) in qs.iter().zip(&results) {
+            check_bound(r, shading.exact_query(q, Unoccluded))?;
+            check_threshold(r, &t)?;
+        }
+        let mut host = Wall { x: wall };
+        shading.shade_batch(&qs, t, &mut host, &mut results).unwrap();
+        for (q, r) in qs.iter().zip(&results) {
+            check_bound(r, shading.exact_query(q, &mut host))?;
             check_threshold(r, &t)?;
         }
     }

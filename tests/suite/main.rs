@@ -18,6 +18,7 @@ mod bound;
 mod cliffs;
 mod common;
 mod contract;
+mod ggx;
 mod grazing;
 mod interpolation;
 mod no_alloc;

@@ -15,8 +15,8 @@
 use crate::common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
 use glam::{DVec3, Vec3};
 use manylights::{
-    Aabb, Coverage, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeResult, Stop,
-    Threshold, Unoccluded, Visibility,
+    Aabb, Coverage, Ggx, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeResult,
+    Stop, Threshold, Unoccluded, Visibility,
 };
 use manylights_report::bvh::corners;
 use proptest::prelude::*;
@@ -339,6 +339,32 @@ fn phong_bound_holds_in_the_street() -> Result<(), TestCaseError> {
                         &mut host,
                     )
                     .unwrap();
+                check_bound(&r, exact)?;
+                check_threshold(&r, &t)?;
+                check_counters(&r, &host)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn ggx_bound_holds_in_the_street() -> Result<(), TestCaseError> {
+    let (lights, walls) = street();
+    let tree = LightTree::build(&lights).unwrap();
+    let eye = Vec3::new(-30.0, -40.0, 25.0);
+    for alpha in [1e-3, 0.05, 0.3, 1.0] {
+        let shader = manylights::Combined::new(
+            Lambert::new(Vec3::splat(0.3)),
+            Ggx::new(Vec3::new(0.9, 0.7, 0.2), alpha),
+        );
+        let mut shading = tree.shading(shader);
+        for (p, n) in street_points() {
+            let q = Query::new(p, n).unwrap().with_view(eye - p).unwrap();
+            let exact = shading.exact_query(&q, &mut Occluders::new(walls.clone()));
+            for t in street_thresholds() {
+                let mut host = Occluders::new(walls.clone());
+                let r = shading.shade_query(&q, t, &mut host).unwrap();
                 check_bound(&r, exact)?;
                 check_threshold(&r, &t)?;
                 check_counters(&r, &host)?;
@@ -699,6 +725,26 @@ proptest! {
                 .exact_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), &mut Occluders::new(boxes.clone()));
             let mut host = Occluders::with_fraction(boxes.clone(), fraction);
             let r = shading.shade_query(&Query::new(p, n).unwrap().with_view(v).unwrap(), t, &mut host).unwrap();
+            check_occluded(&r, exact, &t, &host)?;
+        }
+    }
+
+    #[test]
+    fn ggx_bound_holds_with_occluders(
+        lights in lights(500),
+        boxes in occluders(),
+        points in prop::collection::vec((vec_in(12.0), direction(), direction()), 1..=4),
+        alpha in (-3.0f64..=0.0).prop_map(|u| (10f64.powf(u) as f32).clamp(1e-3, 1.0)),
+        t in any_threshold(),
+        fraction in fraction(),
+    ) {
+        let tree = LightTree::build(&lights).unwrap();
+        let mut shading = tree.shading(Ggx::new(Vec3::new(0.3, 0.6, 0.9), alpha));
+        for (p, n, v) in points {
+            let q = Query::new(p, n).unwrap().with_view(v).unwrap();
+            let exact = shading.exact_query(&q, &mut Occluders::new(boxes.clone()));
+            let mut host = Occluders::with_fraction(boxes.clone(), fraction);
+            let r = shading.shade_query(&q, t, &mut host).unwrap();
             check_occluded(&r, exact, &t, &host)?;
         }
     }
