@@ -172,6 +172,7 @@ mod lanes;
 mod light;
 mod numeric;
 mod phong;
+mod sampling;
 pub mod shader;
 mod shading;
 #[cfg(test)]
@@ -187,6 +188,7 @@ pub use lambert::{BoundKind, Lambert};
 pub(crate) use light::LightLanes;
 pub use light::PointLight;
 pub use phong::Phong;
+pub use sampling::{LightSampler, Sampled, Stochastic};
 pub use shading::{BatchStats, Query, Shading};
 pub use tree::{LightTree, TreeBuilder};
 pub use visibility::{Coverage, NodeRegion, PointGroup, Unoccluded, Visibility};
