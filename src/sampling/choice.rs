@@ -79,7 +79,9 @@ enum Kind {
     /// summed, positive, possibly infinite).
     Known(f64),
     /// No finite bound: the child's ball reaches the point (or its bound
-    /// came out NaN). It gets the fallback importance (see [`Step::of`]).
+    /// came out NaN), and it is not a leaf (a leaf's lights are then summed
+    /// exactly instead). It gets the fallback importance (see
+    /// [`Step::of`]).
     Near,
     /// To be bounded.
     Wanted,
@@ -132,9 +134,7 @@ fn admit<S: Shader>(at: &At<'_, S>, index: usize) -> Kind {
         return Kind::Dark;
     }
     if let (Some(horizon), Some(plane)) = (at.horizon, at.tree.node_plane(index))
-        && at
-            .tree
-            .plane_at_or_below(plane, at.surface.point, horizon)
+        && at.tree.plane_at_or_below(plane, at.surface.point, horizon)
     {
         return Kind::Dark;
     }
@@ -194,9 +194,12 @@ fn geometric(node: &Node, point: DVec3) -> f64 {
 pub(crate) struct Spread {
     /// Candidates that may be lit (`k`).
     lit: u32,
-    /// `1 / max` of the importances, or 0 when the largest is 0 or
-    /// infinite.
-    inv_max: f64,
+    /// The largest importance of a candidate that may be lit; after
+    /// [`normalise`](Self::normalise), 0 when it is 0 or infinite. The
+    /// importances are divided by it rather than multiplied by its inverse:
+    /// a subnormal largest importance (a glossy lobe's far tail) has no
+    /// finite inverse, and `q / max` stays in `[0, 1]` for every finite `q`.
+    max: f64,
     /// Whether some importance is `+inf` (those then share the weighted part
     /// of the choice).
     infinite: bool,
@@ -212,33 +215,30 @@ impl Spread {
     fn new() -> Self {
         Self {
             lit: 0,
-            inv_max: 0.0,
+            max: 0.0,
             infinite: false,
             total: 0.0,
         }
     }
 
     /// First pass: a candidate of `importance` (non-negative or `+inf`)
-    /// that may be lit if `may`; `inv_max` holds the largest importance
-    /// until [`normalise`](Self::normalise).
+    /// that may be lit if `may`.
     #[inline(always)]
     fn count(&mut self, importance: f64, may: bool) {
         if may {
             self.lit += 1;
-            self.inv_max = self.inv_max.max(importance);
+            self.max = self.max.max(importance);
         }
     }
 
-    /// Between the passes: the largest importance turned into its inverse.
+    /// Between the passes: whether the largest importance is infinite (it
+    /// is then set to 0, and the infinite ones share the weighted part).
     #[inline(always)]
     fn normalise(&mut self) {
-        let max = self.inv_max;
-        self.infinite = max == f64::INFINITY;
-        self.inv_max = if max > 0.0 && !self.infinite {
-            1.0 / max
-        } else {
-            0.0
-        };
+        self.infinite = self.max == f64::INFINITY;
+        if !(self.max > 0.0) || self.infinite {
+            self.max = 0.0;
+        }
     }
 
     /// Second pass: the same candidate again, its normalised importance
@@ -256,8 +256,10 @@ impl Spread {
     fn normalised(&self, importance: f64) -> f64 {
         if self.infinite {
             f64::from(u8::from(importance == f64::INFINITY))
+        } else if self.max > 0.0 {
+            importance / self.max
         } else {
-            importance * self.inv_max
+            0.0
         }
     }
 
@@ -304,8 +306,9 @@ impl Step {
     /// The children of node `parent` (not a leaf) at the point `at`.
     ///
     /// Each child is weighed by its importance: its certified bound's
-    /// ([`UPPER_WEIGHT`]), its exact term for a single light, 0 when it
-    /// is dark. A child with no bound gets the fallback `kappa I / max(D^2,
+    /// ([`UPPER_WEIGHT`]), its exact term for a single light, its lights'
+    /// exact terms summed for a leaf whose ball reaches the point, 0 when
+    /// it is dark. A child with no bound gets the fallback `kappa I / max(D^2,
     /// R^2)`, where `kappa` is the largest ratio of importance to `I /
     /// max(D^2, R^2)` among its bounded or single siblings (how much the
     /// shader gives per unit of intensity over squared distance where it is
@@ -333,6 +336,11 @@ impl Step {
         }
         if wanted != 0 {
             bound_wanted(at, parent, first, wanted, &mut kind);
+        }
+        for (i, k) in kind.iter_mut().enumerate().take(len) {
+            if *k == Kind::Near && tree.nodes[first + i].is_leaf() {
+                *k = near_leaf(at, first + i);
+            }
         }
         // The fallback's scale: the largest importance per unit of
         // intensity over squared distance among the children with one.
@@ -405,13 +413,10 @@ fn bound_wanted<S: Shader>(
         parent,
         wanted,
     };
-    if at.shader.bound_children_coarse(
-        Seal,
-        &at.per_point,
-        at.surface,
-        children,
-        &mut coarse,
-    ) {
+    if at
+        .shader
+        .bound_children_coarse(Seal, &at.per_point, at.surface, children, &mut coarse)
+    {
         for i in bits {
             kind[i] = match &coarse[i] {
                 Some(bound) => bounded(bound),
@@ -445,6 +450,19 @@ fn bound_wanted<S: Shader>(
     for (slot, bound) in slots[..len].iter().zip(&bounds[..len]) {
         kind[*slot] = bounded(bound);
     }
+}
+
+/// A leaf child with no bound (its ball reaches the point): its lights'
+/// exact terms summed, which is its exact contribution, so it is dark
+/// exactly when every light of it is. Leaves hold few lights (32 with the
+/// default builder) and only those near the point lack a bound.
+#[inline(always)]
+fn near_leaf<S: Shader>(at: &At<'_, S>, index: usize) -> Kind {
+    let mut sum = 0.0;
+    each_light(at, at.tree.nodes[index].lights(), |_, value| {
+        sum += sanitised(value)
+    });
+    exact(sum)
 }
 
 /// The exact contributions (channels summed) of the lights of `range`
@@ -545,7 +563,10 @@ pub(crate) fn leaf_pick<S: Shader>(
     } else {
         let start = range.start;
         each_light(at, range.clone(), |i, value| {
-            picker.offer(i - start, spread.share(sanitised(value), leaf_may(value, any)));
+            picker.offer(
+                i - start,
+                spread.share(sanitised(value), leaf_may(value, any)),
+            );
         });
     }
     let (k, p, _) = picker.chosen();

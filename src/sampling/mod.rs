@@ -11,8 +11,8 @@ use crate::shading::{Accepts, Query};
 use crate::tree::LightTree;
 
 pub(crate) use choice::At;
-pub(crate) use stochastic::shade_stochastic;
 pub use stochastic::Stochastic;
+pub(crate) use stochastic::shade_stochastic;
 
 /// A light chosen by [`LightSampler::sample`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,7 +49,9 @@ pub struct Sampled {
 ///             certified upper bound 0, a single light whose term is 0)  0
 /// single light (or coincident lights)                       its exact term
 /// bounded child                    estimate + (upper - estimate) / 8
-/// child whose ball reaches the point (no bound)   kappa I / max(D^2, R^2)
+/// leaf whose ball reaches the point            its lights' terms summed
+/// other child whose ball reaches the point
+///                        (no bound)               kappa I / max(D^2, R^2)
 /// ```
 ///
 /// with `kappa` the largest importance per unit of `I / max(D^2, R^2)`

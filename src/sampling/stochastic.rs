@@ -5,12 +5,12 @@
 use glam::{DVec3, Vec3};
 
 use super::choice::{At, descend};
+use crate::Threshold;
 use crate::cut::{ErrorList, Seen, Stop, settle_point};
 use crate::geometry::Surface;
 use crate::shader::Shader;
 use crate::tree::LightTree;
 use crate::visibility::Visibility;
-use crate::Threshold;
 
 /// Samples drawn inside each node the cut leaves: two, so that their
 /// difference gives an unbiased estimate of the variance.
