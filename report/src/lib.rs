@@ -10,14 +10,16 @@
 //!   certified check, error statistics and the printed table), [`options`].
 //! * The report (binary `report`): the baselines [`exact`] (the exact sum,
 //!   vectorized), [`sampling`] (Monte Carlo light sampling after Shirley et
-//!   al. 1996 and Conty & Kulla 2018) and [`shadowed`] (the exact shadowed
+//!   al. 1996 and Conty & Kulla 2018; one-sample samplers with their
+//!   probabilities after pbrt-v4 and Cycles) and [`shadowed`] (the exact shadowed
 //!   sum and Ward 1991); [`measure`], the sweeps ([`config`], [`sweep`],
 //!   [`occluded`] for the night city with shadows and the canopy,
 //!   [`scaling`]), [`plot`], [`csv`], [`summary`], the
 //!   ground scene's evaluations-per-point table ([`evaluations`]), the
 //!   Lambert bounds on the coloured street city ([`bounds`]), batch
-//!   shading of a camera view ([`batch`]) and where a certified cut's work
-//!   goes ([`anatomy`]).
+//!   shading of a camera view ([`batch`]), where a certified cut's work
+//!   goes ([`anatomy`]) and light sampling for path tracers
+//!   ([`light_sampling`]).
 
 pub mod anatomy;
 pub mod batch;
@@ -30,6 +32,7 @@ pub mod csv;
 pub mod evaluations;
 pub mod exact;
 pub mod image;
+pub mod light_sampling;
 pub mod measure;
 pub mod occluded;
 pub mod options;

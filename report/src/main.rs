@@ -9,6 +9,7 @@
 //! cargo run --release -p manylights-report -- shadows         # the occluded scenes alone
 //! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
 //! cargo run --release -p manylights-report -- anatomy         # where a cut's work goes
+//! cargo run --release -p manylights-report -- sampling        # light sampling for path tracers
 //! ```
 //!
 //! The full report takes about a minute on 2 cores, plus about two minutes
@@ -26,7 +27,10 @@
 //! of these. `anatomy` (where a certified cut's work goes on the street
 //! city at 10^4 to 10^6 lights: refinements, bounded children by depth and
 //! distance, the final entries' errors and how loose their bounds are)
-//! runs only when named.
+//! runs only when named, and so does `sampling` (one light per shading
+//! point by the crate's `LightSampler` against power sampling, pbrt-v4's
+//! and Cycles' importances on the same tree, and the stochastic cut; a few
+//! minutes).
 //! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
 //! repository root:
 //!
@@ -60,6 +64,7 @@ use manylights_report::config::{
 };
 use manylights_report::csv::{write_csv, write_scaling_csv};
 use manylights_report::evaluations::print_evaluations_table;
+use manylights_report::light_sampling::{SAMPLING, run_sampling};
 use manylights_report::measure::MAX_PASSES;
 use manylights_report::occluded::run_occluded;
 use manylights_report::plot::{plot_scaling, plot_scene};
@@ -91,7 +96,7 @@ fn main() -> Result<(), Box<dyn Error>> {
             SHADOWS => parts.extend(OCCLUDED_NAMES.map(String::from)),
             name if SCENE_NAMES.contains(&name)
                 || OCCLUDED_NAMES.contains(&name)
-                || [EVALUATIONS, BOUNDS, BATCH, SCALING, ANATOMY].contains(&name) =>
+                || [EVALUATIONS, BOUNDS, BATCH, SCALING, ANATOMY, SAMPLING].contains(&name) =>
             {
                 parts.push(arg)
             }
@@ -99,7 +104,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
                      [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {SHADOWS} | {SCALING} | \
-                     {ANATOMY}]...",
+                     {ANATOMY} | {SAMPLING}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -132,9 +137,12 @@ fn main() -> Result<(), Box<dyn Error>> {
     }
     if named(ANATOMY) {
         print_anatomy()?;
-        if parts.iter().all(|p| p == ANATOMY) {
-            return Ok(());
-        }
+    }
+    if named(SAMPLING) {
+        run_sampling(quick)?;
+    }
+    if !parts.is_empty() && parts.iter().all(|p| p == ANATOMY || p == SAMPLING) {
+        return Ok(());
     }
     println!("{METHODS}");
     println!(
