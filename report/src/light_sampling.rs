@@ -76,7 +76,9 @@ fn orbit_points(count: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
         let radial = Vec3::new(s * phi.cos(), s * phi.sin(), z);
         let p = radial * SPHERE_RADIUS * rng.random_range(1.5..3.0);
         let tangent = radial.any_orthonormal_vector();
-        let tangent = glam::Quat::from_axis_angle(radial, rng.random_range(0.0..6.28)) * tangent;
+        let tangent =
+            glam::Quat::from_axis_angle(radial, rng.random_range(0.0..std::f32::consts::TAU))
+                * tangent;
         let beta: f32 = rng.random_range(-0.3..1.0);
         let normal = (tangent * beta.cos() - radial * beta.sin()).normalize();
         if normal.dot(p).abs() < 0.9 * SPHERE_RADIUS {

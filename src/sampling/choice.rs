@@ -372,8 +372,8 @@ impl Step {
         }
         if !may[..len].iter().any(|&m| m) {
             // A dead end: every child certified dark.
-            for i in 0..len {
-                may[i] = tree.nodes[first + i].intensity != DVec3::ZERO;
+            for (m, child) in may[..len].iter_mut().zip(&tree.nodes[first..]) {
+                *m = child.intensity != DVec3::ZERO;
             }
         }
         let mut spread = Spread::new();
