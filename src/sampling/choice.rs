@@ -24,17 +24,31 @@ use crate::tree::{LightTree, MAX_CHILDREN, Node};
 /// 97 levels above `f64::MIN_POSITIVE`.
 pub(crate) const DEFENSIVE_SHARE: f64 = 1.0 / 256.0;
 
-/// Weight of a child's certified upper bound against its estimate in its
-/// importance, `estimate + UPPER_WEIGHT (upper - estimate)` (channels
-/// summed). The estimate is close to the exact contribution wherever the
-/// bound is tight; where it is wide (nodes near the point, or straddling
-/// its tangent plane) the estimate can be far below the exact value, and
-/// sampling a node at a fraction `f` of its share multiplies its term of
-/// the second moment by `1 / f`: the weight caps that factor at `1 /
-/// UPPER_WEIGHT` for every node whose exact value is at most its upper
-/// bound. `cargo run --release -p manylights-report -- sampling` prints the
+/// How wide a child's certified interval may be for its estimate to serve
+/// as its importance: `upper <= TIGHT_RATIO * lower` (channels summed).
+/// Within such an interval the estimate is off the exact value by less
+/// than a factor `TIGHT_RATIO` either way (both lie in it), and far nodes
+/// are well inside it (the street city's nodes beyond two radii have
+/// intervals about `[0.6, 1.5]` times the exact value). A wider interval
+/// (a node near the point or straddling its tangent plane, where the lower
+/// bound is often 0) says little of where the value lies: its midpoint can
+/// be hundreds of times the exact value. Such a child gets the geometric
+/// importance ([`geometric`]) clamped into its interval instead.
+/// `cargo run --release -p manylights-report -- sampling` prints the
 /// variances this gives; `docs/tuning.md` records the choice.
-pub(crate) const UPPER_WEIGHT: f64 = 0.125;
+pub(crate) const TIGHT_RATIO: f64 = 4.0;
+
+/// The geometric importance's distance is clamped below at `R / NEAR_DIVISOR`
+/// (`R` the node's radius), as pbrt-v4's `LightBounds::Importance` clamps
+/// it to the node's size. A ball of lights that reaches the point
+/// contributes about `I / R^2` times the mean of `R^2 / r^2` over its
+/// lights, which is 3 for lights filling the ball evenly around the point,
+/// and grows without bound for lights along lines or planes through it
+/// (street lamps, windows of a facade): a clamp at `R` starves such nodes.
+/// 4 (a factor 16 on `I / R^2`) is the measured choice: on the street city,
+/// clamping at `R`, `R / 2`, `R / 4` and `R / 8` gave one-sample relative
+/// variances of about 10, 2.2, 1.9 and 1.9 (`docs/tuning.md`).
+pub(crate) const NEAR_DIVISOR: f64 = 4.0;
 
 /// The largest `f64` below 1: where a stretched `u` is clamped.
 pub(crate) const ONE_BELOW: f64 = 1.0 - f64::EPSILON / 2.0;
@@ -75,12 +89,16 @@ enum Kind {
     /// below the horizon plane, a certified upper bound of 0, or a single
     /// light whose exact term is 0.
     Dark,
-    /// An importance from a certified bound or an exact term (channels
-    /// summed, positive, possibly infinite).
+    /// An exact term, or the estimate of a tight certified interval
+    /// ([`TIGHT_RATIO`]): the importance itself (channels summed, positive,
+    /// possibly infinite), and the scale of the geometric importance.
     Known(f64),
+    /// A wide certified interval `[lower, upper]` (channels summed, `upper
+    /// > 0`): the geometric importance clamped into it.
+    Loose(f64, f64),
     /// No finite bound: the child's ball reaches the point (or its bound
     /// came out NaN), and it is not a leaf (a leaf's lights are then summed
-    /// exactly instead). It gets the fallback importance (see
+    /// exactly instead). It gets the geometric importance (see
     /// [`Step::of`]).
     Near,
     /// To be bounded.
@@ -104,24 +122,30 @@ fn exact(value: f64) -> Kind {
     }
 }
 
-/// The importance of a bounded child: dark when the certified upper bound
-/// is 0 in every channel; `estimate + UPPER_WEIGHT (upper - estimate)`
-/// (channels summed, the estimate taken at least 0) otherwise; [`Kind::Near`]
-/// for a bound with a NaN.
+/// The kind of a bounded child (channels summed): dark when the certified
+/// upper bound is 0 in every channel; its estimate when the interval is
+/// tight (`upper <= TIGHT_RATIO lower`, [`TIGHT_RATIO`]); [`Kind::Loose`]
+/// otherwise; [`Kind::Near`] for a bound with a NaN.
 #[inline(always)]
 fn bounded(bound: &NodeEstimate) -> Kind {
     let upper = scalar(bound.upper);
-    let estimate = scalar(bound.estimate).max(0.0);
-    if upper.is_nan() || scalar(bound.estimate).is_nan() {
+    let lower = scalar(bound.lower).max(0.0);
+    let estimate = scalar(bound.estimate);
+    if upper.is_nan() || estimate.is_nan() || lower.is_nan() {
         return Kind::Near;
     }
     if bound.upper.max_element() <= 0.0 {
         return Kind::Dark;
     }
-    let importance = estimate + UPPER_WEIGHT * (upper - estimate).max(0.0);
-    // A positive upper bound whose weighted share underflows still may be
-    // lit: the smallest positive number keeps it a candidate.
-    Kind::Known(importance.max(f64::MIN_POSITIVE))
+    if upper <= TIGHT_RATIO * lower {
+        // The estimate clamped into the interval (a shader's estimate
+        // should lie in it already). A positive upper bound whose
+        // importance underflows still may be lit: the smallest positive
+        // number keeps it a candidate.
+        Kind::Known(estimate.max(lower).min(upper).max(f64::MIN_POSITIVE))
+    } else {
+        Kind::Loose(lower.min(upper), upper)
+    }
 }
 
 /// What needs no bound of node `index`: dark nodes, nodes whose lights lie
@@ -165,25 +189,47 @@ pub(crate) fn start_is_dark<S: Shader>(at: &At<'_, S>, index: usize) -> bool {
                 bounded(&bound) == Kind::Dark
             })
         }
-        Kind::Known(_) | Kind::Near => false,
+        Kind::Known(_) | Kind::Loose(..) | Kind::Near => false,
     }
 }
 
-/// `D^2 / I`'s inverse for a node, `I / max(D^2, R^2)` (channels of the
-/// intensity summed, `D` the distance from the point to the centroid, `R`
-/// the radius): the geometric part of the fallback importance, and of the
-/// scale it is calibrated by.
+/// The geometric importance of a node, after pbrt-v4's
+/// `LightBounds::Importance` for isotropic emitters: `I cos' / max(D^2,
+/// (R / NEAR_DIVISOR)^2)` with `I` the intensity's channels summed, `D` the
+/// distance from the point to the centroid, `R` the radius, and `cos'` the
+/// cosine of the angle between the horizon vector and the direction to the
+/// centroid, narrowed by the ball's half-angle `asin(R / D)` (1 when the
+/// ball reaches the point or the angle is within the half-angle, at least
+/// 0; 1 for a shader with no horizon). It is what the node would give
+/// through a constant BRDF, lights spread over its ball; `Step::of` scales
+/// it by the shader's measured ratio.
 #[inline(always)]
-fn geometric(node: &Node, point: DVec3) -> f64 {
+fn geometric(node: &Node, point: DVec3, horizon: Option<DVec3>) -> f64 {
     let radius = f64::from(node.radius);
-    let d2 = (node.centroid.as_dvec3() - point)
-        .length_squared()
-        .max(radius * radius);
-    if d2 > 0.0 {
-        scalar(node.intensity) / d2
-    } else {
-        0.0
+    let offset = node.centroid.as_dvec3() - point;
+    let d2 = offset.length_squared();
+    let clamp = radius / NEAR_DIVISOR;
+    let floor = d2.max(clamp * clamp);
+    if !(floor > 0.0) {
+        return 0.0;
     }
+    let cosine = match horizon {
+        Some(axis) if d2 > radius * radius => {
+            let distance = d2.sqrt();
+            let cos_t = (axis.dot(offset) / distance).clamp(-1.0, 1.0);
+            let sin_b = radius / distance;
+            let cos_b = (1.0 - sin_b * sin_b).max(0.0).sqrt();
+            if cos_t >= cos_b {
+                1.0
+            } else {
+                // cos(theta - beta) for theta > beta.
+                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                (cos_t * cos_b + sin_t * sin_b).max(0.0)
+            }
+        }
+        _ => 1.0,
+    };
+    scalar(node.intensity) * cosine / floor
 }
 
 /// The spread of one choice: how many candidates may be lit, and the
@@ -305,15 +351,16 @@ const NO_CONE: Cone = Cone {
 impl Step {
     /// The children of node `parent` (not a leaf) at the point `at`.
     ///
-    /// Each child is weighed by its importance: its certified bound's
-    /// ([`UPPER_WEIGHT`]), its exact term for a single light, its lights'
-    /// exact terms summed for a leaf whose ball reaches the point, 0 when
-    /// it is dark. A child with no bound gets the fallback `kappa I / max(D^2,
-    /// R^2)`, where `kappa` is the largest ratio of importance to `I /
-    /// max(D^2, R^2)` among its bounded or single siblings (how much the
-    /// shader gives per unit of intensity over squared distance where it is
-    /// known; 1 when no sibling has a bound, the fallback then weighing
-    /// the unbounded children by intensity over squared distance alone).
+    /// Each child is weighed by its importance: 0 when it is dark; its
+    /// exact term for a single light; its estimate when its certified
+    /// interval is tight ([`TIGHT_RATIO`]); its lights' exact terms summed
+    /// for a leaf whose ball reaches the point. The others, a wide interval
+    /// or no bound (the ball reaches the point), get `kappa g` with `g` the
+    /// [`geometric`] importance, clamped into the certified interval where
+    /// there is one; `kappa` is the largest ratio of importance to `g`
+    /// among the single or tightly bounded siblings (how much the shader
+    /// gives per unit of `g` where that is known; 1 when no sibling tells,
+    /// the children then being weighed by `g` and their intervals alone).
     /// Then [`Spread::share`] sets the probabilities.
     ///
     /// When no child may be lit (every one certified dark though the parent
@@ -337,25 +384,36 @@ impl Step {
         if wanted != 0 {
             bound_wanted(at, parent, first, wanted, &mut kind);
         }
-        for (i, k) in kind.iter_mut().enumerate().take(len) {
-            if *k == Kind::Near && tree.nodes[first + i].is_leaf() {
-                *k = near_leaf(at, first + i);
-            }
-        }
-        // The fallback's scale: the largest importance per unit of
-        // intensity over squared distance among the children with one.
+        // The geometric importance's scale: the largest importance per
+        // unit of it among the single or tightly bounded children (before
+        // the near leaves' exact sums join them: an exact sum near the point
+        // is no measure of the shader's scale).
         let point = at.surface.point;
+        let horizon = at
+            .horizon
+            .map(|h| h.as_dvec3().normalize_or_zero())
+            .filter(|h| *h != DVec3::ZERO);
+        let mut g = [0.0f64; MAX_CHILDREN];
         let mut kappa = 0.0f64;
         for (i, k) in kind.iter().enumerate().take(len) {
             match *k {
                 Kind::Known(importance) => {
-                    let g = geometric(&tree.nodes[first + i], point);
-                    let ratio = importance / g;
-                    if g > 0.0 && ratio.is_finite() {
+                    g[i] = geometric(&tree.nodes[first + i], point, horizon);
+                    let ratio = importance / g[i];
+                    if g[i] > 0.0 && ratio.is_finite() {
                         kappa = kappa.max(ratio);
                     }
                 }
-                Kind::Dark | Kind::Near | Kind::Wanted => {}
+                Kind::Loose(..) | Kind::Near => {
+                    g[i] = geometric(&tree.nodes[first + i], point, horizon);
+                }
+                Kind::Dark | Kind::Wanted => {}
+            }
+        }
+        let scale = if kappa > 0.0 { kappa } else { 1.0 };
+        for (i, k) in kind.iter_mut().enumerate().take(len) {
+            if *k == Kind::Near && tree.nodes[first + i].is_leaf() {
+                *k = near_leaf(at, first + i);
             }
         }
         let mut importance = [0.0f64; MAX_CHILDREN];
@@ -363,10 +421,14 @@ impl Step {
         for i in 0..len {
             (importance[i], may[i]) = match kind[i] {
                 Kind::Known(v) => (v, true),
-                Kind::Near => {
-                    let scale = if kappa > 0.0 { kappa } else { 1.0 };
-                    (scale * geometric(&tree.nodes[first + i], point), true)
-                }
+                // A positive upper bound whose importance underflows still
+                // may be lit: the smallest positive number keeps it a
+                // candidate. (`max` ignores a NaN product.)
+                Kind::Loose(lower, upper) => (
+                    (scale * g[i]).max(lower).min(upper).max(f64::MIN_POSITIVE),
+                    true,
+                ),
+                Kind::Near => (scale * g[i], true),
                 Kind::Dark | Kind::Wanted => (0.0, false),
             };
         }

@@ -42,31 +42,41 @@ pub struct Sampled {
 ///
 /// At each node the descent bounds the children at the query
 /// ([`Shader::bound`], or the crate's shaders' coarse bounds of children
-/// side by side; channels summed) and gives each child the importance
+/// side by side; channels summed) and gives each child an importance that
+/// estimates its contribution, the certified bound serving as the zero
+/// test and as a clamp:
 ///
 /// ```text
 /// dark child (no intensity, lights at or below the horizon plane,
 ///             certified upper bound 0, a single light whose term is 0)  0
 /// single light (or coincident lights)                       its exact term
-/// bounded child                    estimate + (upper - estimate) / 8
+/// tight interval (upper <= 4 lower)                          its estimate
 /// leaf whose ball reaches the point            its lights' terms summed
-/// other child whose ball reaches the point
-///                        (no bound)               kappa I / max(D^2, R^2)
+/// wide interval [lower, upper]      kappa g clamped into [lower, upper]
+/// other child whose ball reaches the point (no bound)           kappa g
 /// ```
 ///
-/// with `kappa` the largest importance per unit of `I / max(D^2, R^2)`
-/// among its bounded siblings (1 when none has a bound). The estimate is
-/// close to the exact contribution wherever the bound is tight; the eighth
-/// of the bound's width keeps a node whose estimate is far too low (near
-/// the point, or straddling its tangent plane) from being starved: its
-/// share is at least an eighth of its upper bound's, so its term of the
-/// second moment grows by at most 8. A child is then chosen with
-/// probability `(1 - 2^-8) q / Q + 2^-8 / k`, `q` its importance, `Q` the
-/// sum over the `k` children that may be lit (defensive mixing: no lit
-/// child's share can round to 0, and a poor importance costs at most about
-/// 0.4% of the second moment per level). In a leaf, a light is chosen in
-/// proportion to its exact term ([`Shader::eval`], channels summed), mixed
-/// the same way over the lights that contribute.
+/// `g = I cos' / max(D^2, (R / 4)^2)` is a geometric importance after
+/// pbrt-v4's `LightBounds::Importance`: `I` the node's intensity, `D` the
+/// distance to its centroid, `R` its radius, `cos'` the cosine between the
+/// shader's horizon vector and the direction to the centroid, narrowed by
+/// the ball's half-angle (1 when the ball reaches the point). `kappa` is
+/// the largest ratio of importance to `g` among the single or tightly
+/// bounded siblings (1 when none). The shader's estimate is close to the
+/// exact contribution where the interval is tight (far nodes); where it is
+/// wide (nodes near the point or straddling its tangent plane, lower bound
+/// often 0) its midpoint can be hundreds of times the exact value, and `g`
+/// follows the contribution far better, while the clamp keeps it within
+/// what is certified. The distance clamp at `R / 4` rather than `R` keeps
+/// nodes whose ball reaches the point from being starved: their lights
+/// along lines and planes through the point give far more than `I / R^2`.
+/// A child is then chosen with probability `(1 - 2^-8) q / Q + 2^-8 / k`,
+/// `q` its importance, `Q` the sum over the `k` children that may be lit
+/// (defensive mixing: no lit child's share can round to 0, and a poor
+/// importance costs at most about 0.4% of the second moment per level). In
+/// a leaf, a light is chosen in proportion to its exact term
+/// ([`Shader::eval`], channels summed), mixed the same way over the lights
+/// that contribute.
 ///
 /// Guarantees, for a shader whose bounds meet [`NodeEstimate`]'s contract
 /// and whose [`horizon`](Shader::horizon) is honest:
