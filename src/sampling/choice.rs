@@ -26,17 +26,19 @@ pub(crate) const DEFENSIVE_SHARE: f64 = 1.0 / 256.0;
 
 /// How wide a child's certified interval may be for its estimate to serve
 /// as its importance: `upper <= TIGHT_RATIO * lower` (channels summed).
-/// Within such an interval the estimate is off the exact value by less
-/// than a factor `TIGHT_RATIO` either way (both lie in it), and far nodes
-/// are well inside it (the street city's nodes beyond two radii have
-/// intervals about `[0.6, 1.5]` times the exact value). A wider interval
-/// (a node near the point or straddling its tangent plane, where the lower
-/// bound is often 0) says little of where the value lies: its midpoint can
-/// be hundreds of times the exact value. Such a child gets the geometric
-/// importance ([`geometric`]) clamped into its interval instead.
-/// `cargo run --release -p manylights-report -- sampling` prints the
-/// variances this gives; `docs/tuning.md` records the choice.
-pub(crate) const TIGHT_RATIO: f64 = 4.0;
+/// Within such an interval the estimate is within a factor `TIGHT_RATIO` of
+/// the exact value either way (both lie in it). A wider interval (a node
+/// near the point or straddling its tangent plane, where the lower bound
+/// is often 0) says little of where the value lies: its midpoint can be
+/// hundreds of times the exact value. Such a child gets the geometric
+/// importance ([`geometric`]) clamped into its interval instead. 2 is the
+/// measured choice: on the sphere of lights seen from orbit, ratios 2 and 4
+/// gave one-sample relative variances of about 0.07 and 0.12 (the
+/// geometric importance does better than the estimate already between
+/// them), on the street city the same to 2%; `cargo run --release -p
+/// manylights-report -- sampling` prints the variances, `docs/tuning.md`
+/// records the choice.
+pub(crate) const TIGHT_RATIO: f64 = 2.0;
 
 /// The geometric importance's distance is clamped below at `R / NEAR_DIVISOR`
 /// (`R` the node's radius), as pbrt-v4's `LightBounds::Importance` clamps
@@ -194,15 +196,14 @@ pub(crate) fn start_is_dark<S: Shader>(at: &At<'_, S>, index: usize) -> bool {
 }
 
 /// The geometric importance of a node, after pbrt-v4's
-/// `LightBounds::Importance` for isotropic emitters: `I cos' / max(D^2,
-/// (R / NEAR_DIVISOR)^2)` with `I` the intensity's channels summed, `D` the
-/// distance from the point to the centroid, `R` the radius, and `cos'` the
-/// cosine of the angle between the horizon vector and the direction to the
-/// centroid, narrowed by the ball's half-angle `asin(R / D)` (1 when the
-/// ball reaches the point or the angle is within the half-angle, at least
-/// 0; 1 for a shader with no horizon). It is what the node would give
-/// through a constant BRDF, lights spread over its ball; `Step::of` scales
-/// it by the shader's measured ratio.
+/// `LightBounds::Importance` for isotropic emitters with a softer cosine:
+/// `I c / max(D^2, (R / NEAR_DIVISOR)^2)`, with `I` the intensity's
+/// channels summed, `D` the distance from the point to the centroid, `R`
+/// the radius, and `c` the mean clamped cosine [`soft_cosine`] of the
+/// node's lights against the shader's horizon vector (1 when the ball
+/// reaches the point or the shader has no horizon). It is what the node
+/// would give through a constant BRDF; `Step::of` scales it by the
+/// shader's measured ratio.
 #[inline(always)]
 fn geometric(node: &Node, point: DVec3, horizon: Option<DVec3>) -> f64 {
     let radius = f64::from(node.radius);
@@ -214,22 +215,55 @@ fn geometric(node: &Node, point: DVec3, horizon: Option<DVec3>) -> f64 {
         return 0.0;
     }
     let cosine = match horizon {
-        Some(axis) if d2 > radius * radius => {
-            let distance = d2.sqrt();
-            let cos_t = (axis.dot(offset) / distance).clamp(-1.0, 1.0);
-            let sin_b = radius / distance;
-            let cos_b = (1.0 - sin_b * sin_b).max(0.0).sqrt();
-            if cos_t >= cos_b {
-                1.0
-            } else {
-                // cos(theta - beta) for theta > beta.
-                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-                (cos_t * cos_b + sin_t * sin_b).max(0.0)
-            }
-        }
+        Some(axis) if d2 > radius * radius => soft_cosine(node, offset, d2, axis),
         _ => 1.0,
     };
-    scalar(node.intensity) * cosine / floor
+    let g = scalar(node.intensity) * cosine / floor;
+    if g.is_finite() { g } else { 0.0 }
+}
+
+/// `sqrt(3)`: the half-width of the uniform distribution of unit variance.
+const UNIFORM_HALF_WIDTH: f64 = 1.732_050_807_568_877_2;
+
+/// The mean clamped cosine `max(0, a . (x - p)) / D` of a node's lights
+/// seen from outside its ball (`offset = c - p`, `d2 = D^2`, `a` the unit
+/// horizon vector), the distances taken as `D`: the heights `a . (x - c)`
+/// of the lights above the centroid's are modelled as uniform on `[-w,
+/// w]`, `w = sqrt(3) sigma` of the same variance `sigma^2 = a^T S a` (the
+/// node's second moments `S` about the centroid, intensity-weighted over
+/// the channels), at most `R`. With `h = a . offset` the mean of `max(0, h
+/// + u)` is then `h` for `h >= w`, 0 for `h <= -w`, and `(h + w)^2 / (4 w)`
+/// between: a node straddling the tangent plane gets the part of it above
+/// the plane, where pbrt-v4's cone widening gives the whole node the
+/// cosine of its nearest edge. On the sphere of lights seen from orbit
+/// this cut the one-sample variance about four times (`docs/tuning.md`).
+#[inline(always)]
+fn soft_cosine(node: &Node, offset: DVec3, d2: f64, axis: DVec3) -> f64 {
+    let height = axis.dot(offset);
+    let quadratic = |m: &[f32; 6]| {
+        let [xx, yy, zz, xy, xz, yz] = m.map(f64::from);
+        axis.x * axis.x * xx
+            + axis.y * axis.y * yy
+            + axis.z * axis.z * zz
+            + 2.0 * (axis.x * axis.y * xy + axis.x * axis.z * xz + axis.y * axis.z * yz)
+    };
+    let [s0, s1, s2] = &node.channel_covariances;
+    let i = node.intensity;
+    let total = scalar(i);
+    let variance = if total > 0.0 {
+        (i.x * quadratic(s0) + i.y * quadratic(s1) + i.z * quadratic(s2)) / total
+    } else {
+        0.0
+    };
+    let width = (UNIFORM_HALF_WIDTH * variance.max(0.0).sqrt()).min(f64::from(node.radius));
+    let mean = if height >= width {
+        height
+    } else if height <= -width {
+        0.0
+    } else {
+        (height + width) * (height + width) / (4.0 * width)
+    };
+    (mean / d2.sqrt()).clamp(0.0, 1.0)
 }
 
 /// The spread of one choice: how many candidates may be lit, and the

@@ -50,17 +50,18 @@ pub struct Sampled {
 /// dark child (no intensity, lights at or below the horizon plane,
 ///             certified upper bound 0, a single light whose term is 0)  0
 /// single light (or coincident lights)                       its exact term
-/// tight interval (upper <= 4 lower)                          its estimate
+/// tight interval (upper <= 2 lower)                          its estimate
 /// leaf whose ball reaches the point            its lights' terms summed
 /// wide interval [lower, upper]      kappa g clamped into [lower, upper]
 /// other child whose ball reaches the point (no bound)           kappa g
 /// ```
 ///
-/// `g = I cos' / max(D^2, (R / 4)^2)` is a geometric importance after
+/// `g = I c / max(D^2, (R / 4)^2)` is a geometric importance after
 /// pbrt-v4's `LightBounds::Importance`: `I` the node's intensity, `D` the
-/// distance to its centroid, `R` its radius, `cos'` the cosine between the
-/// shader's horizon vector and the direction to the centroid, narrowed by
-/// the ball's half-angle (1 when the ball reaches the point). `kappa` is
+/// distance to its centroid, `R` its radius, `c` the mean clamped cosine
+/// of its lights against the shader's horizon vector, their heights above
+/// the tangent plane modelled as uniform with the variance of the node's
+/// second moments (1 when the ball reaches the point). `kappa` is
 /// the largest ratio of importance to `g` among the single or tightly
 /// bounded siblings (1 when none). The shader's estimate is close to the
 /// exact contribution where the interval is tight (far nodes); where it is
