@@ -4,7 +4,8 @@
 //!
 //! Two samplers render the same view at equal time: the crate's
 //! [`LightSampler`](manylights::LightSampler) (children chosen by
-//! importances from certified bounds) and pbrt-v4's `BVHLightSampler`
+//! estimates of their contributions clamped into their certified bounds)
+//! and pbrt-v4's `BVHLightSampler`
 //! importance (its `LightBounds::Importance` descent, written from its
 //! public description in the report's `sampling` module) on the same tree.
 //! The crate's sampler gets `--spp` samples per pixel; pbrt-v4's the

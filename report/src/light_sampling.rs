@@ -243,7 +243,7 @@ pub fn run_sampling(quick: bool) -> Result<(), Box<dyn Error>> {
          pbrt-v4 (BVHLightSampler's descent with LightBounds::Importance of each node's box \
          and summed largest channels, leaf lights by their own importance); Cycles (light \
          tree, 0.5 (p_max + p_min), point-light groups' minimum importance 0); crate \
-         (LightSampler: certified bounds). All on the crate's tree (octree, up to 32 lights a \
+         (LightSampler: estimates clamped into certified bounds). All on the crate's tree (octree, up to 32 lights a \
          leaf). No VPL scene: the crate has no oriented emitters yet.\n"
     );
     for mut case in cases(quick)? {
