@@ -453,7 +453,7 @@ fn pbrt_importance(b: &PbrtBounds, p: DVec3, n: DVec3) -> f64 {
 
 /// pbrt-v4's `BVHLightSampler` descent on the crate's tree (its
 /// `src/pbrt/lightsamplers.h`): at each node a child with probability in
-/// proportion to [`pbrt_importance`] of its bounds (the node's box and
+/// proportion to `pbrt_importance` of its bounds (the node's box and
 /// summed largest channels), no sample when every child's is 0; in a leaf
 /// (pbrt's leaves hold one light each, the crate's up to 32) a light in
 /// proportion to its own importance as a point (`phi |cos| / d^2`).
