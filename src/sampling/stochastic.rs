@@ -32,7 +32,11 @@ pub struct Stochastic {
     /// over the nodes sampled, `(x1 - x2)^2 / 4` summed, `x1` and `x2` a
     /// node's two samples (independent, so this is unbiased for the
     /// variance of their mean, and the nodes' samples are independent of
-    /// each other's). 0 where the cut settled everything.
+    /// each other's). 0 where the cut settled everything. One call's
+    /// estimate is itself noisy, and skewed low: where one light dominates
+    /// a node both samples often pick it, and the difference is then 0
+    /// however large the node's variance. Average it over many calls (or
+    /// points) before judging an error by it.
     pub variance: DVec3,
     /// Nodes the cut left, each sampled twice.
     pub nodes_sampled: u32,
