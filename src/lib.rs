@@ -179,6 +179,7 @@ mod lanes;
 mod light;
 mod numeric;
 mod phong;
+mod sampling;
 pub mod shader;
 mod shading;
 #[cfg(test)]
@@ -195,6 +196,7 @@ pub use lambert::{BoundKind, Lambert};
 pub(crate) use light::LightLanes;
 pub use light::PointLight;
 pub use phong::Phong;
+pub use sampling::{LightSampler, Sampled, Stochastic};
 pub use shading::{BatchStats, Query, Shading};
 pub use tree::{LightTree, TreeBuilder};
 pub use visibility::{Coverage, NodeRegion, PointGroup, Unoccluded, Visibility};

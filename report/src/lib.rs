@@ -10,7 +10,8 @@
 //!   certified check, error statistics and the printed table), [`options`].
 //! * The report (binary `report`): the baselines [`exact`] (the exact sum,
 //!   vectorized), [`sampling`] (Monte Carlo light sampling after Shirley et
-//!   al. 1996 and Conty & Kulla 2018) and [`shadowed`] (the exact shadowed
+//!   al. 1996 and Conty & Kulla 2018; one-sample samplers with their
+//!   probabilities after pbrt-v4 and Cycles) and [`shadowed`] (the exact shadowed
 //!   sum and Ward 1991); [`measure`], the sweeps ([`config`], [`sweep`],
 //!   [`occluded`] for the night city with shadows and the canopy,
 //!   [`mesh_city`] for the same city's buildings as triangles under
@@ -18,8 +19,9 @@
 //!   [`scaling`]), [`plot`], [`csv`], [`summary`], the
 //!   ground scene's evaluations-per-point table ([`evaluations`]), the
 //!   Lambert bounds on the coloured street city ([`bounds`]), batch
-//!   shading of a camera view ([`batch`]) and where a certified cut's work
-//!   goes ([`anatomy`]).
+//!   shading of a camera view ([`batch`]), where a certified cut's work
+//!   goes ([`anatomy`]) and light sampling for path tracers
+//!   ([`light_sampling`]).
 
 pub mod anatomy;
 pub mod batch;
@@ -33,6 +35,7 @@ pub mod evaluations;
 pub mod exact;
 pub mod ggx;
 pub mod image;
+pub mod light_sampling;
 pub mod measure;
 pub mod mesh_city;
 pub mod occluded;

@@ -10,6 +10,7 @@
 //! cargo run --release -p manylights-report -- city-shadows --shadow-lights 100000
 //! cargo run --release -p manylights-report -- anatomy         # where a cut's work goes
 //! cargo run --release -p manylights-report -- ggx             # GGX against Phong and the exact sum
+//! cargo run --release -p manylights-report -- sampling        # light sampling for path tracers
 //! ```
 //!
 //! The full report takes about a minute on 2 cores, plus about two minutes
@@ -29,9 +30,12 @@
 //! of these. `anatomy` (where a certified cut's work goes on the street
 //! city at 10^4 to 10^6 lights: refinements, bounded children by depth and
 //! distance, the final entries' errors and how loose their bounds are)
-//! runs only when named, as does `ggx` (the GGX shader at a certified 1%
+//! runs only when named, as do `ggx` (the GGX shader at a certified 1%
 //! on the street city, 10^4 to 10^6 lights, against Phong of the matching
-//! lobe and the vectorized exact GGX sum, [`manylights_report::ggx`]).
+//! lobe and the vectorized exact GGX sum, [`manylights_report::ggx`]) and
+//! `sampling` (one light per shading point by the crate's `LightSampler`
+//! against power sampling, pbrt-v4's and Cycles' importances on the same
+//! tree, and the stochastic cut; a few minutes).
 //! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
 //! repository root:
 //!
@@ -66,6 +70,7 @@ use manylights_report::config::{
 use manylights_report::csv::{write_csv, write_scaling_csv};
 use manylights_report::evaluations::print_evaluations_table;
 use manylights_report::ggx::print_ggx;
+use manylights_report::light_sampling::{SAMPLING, run_sampling};
 use manylights_report::measure::MAX_PASSES;
 use manylights_report::mesh_city::{CITY_MESH, run_city_mesh};
 use manylights_report::occluded::run_occluded;
@@ -104,8 +109,17 @@ fn main() -> Result<(), Box<dyn Error>> {
             }
             name if SCENE_NAMES.contains(&name)
                 || OCCLUDED_NAMES.contains(&name)
-                || [EVALUATIONS, BOUNDS, BATCH, SCALING, ANATOMY, CITY_MESH, GGX]
-                    .contains(&name) =>
+                || [
+                    EVALUATIONS,
+                    BOUNDS,
+                    BATCH,
+                    SCALING,
+                    ANATOMY,
+                    CITY_MESH,
+                    GGX,
+                    SAMPLING,
+                ]
+                .contains(&name) =>
             {
                 parts.push(arg)
             }
@@ -113,7 +127,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
                      [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {CITY_MESH} | {SHADOWS} | \
-                     {SCALING} | {ANATOMY} | {GGX}]...",
+                     {SCALING} | {ANATOMY} | {GGX} | {SAMPLING}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -150,7 +164,14 @@ fn main() -> Result<(), Box<dyn Error>> {
     if named(GGX) {
         print_ggx()?;
     }
-    if !parts.is_empty() && parts.iter().all(|p| p == ANATOMY || p == GGX) {
+    if named(SAMPLING) {
+        run_sampling(quick)?;
+    }
+    if !parts.is_empty()
+        && parts
+            .iter()
+            .all(|p| p == ANATOMY || p == GGX || p == SAMPLING)
+    {
         return Ok(());
     }
     println!("{METHODS}");

@@ -24,7 +24,18 @@ impl Options {
     /// Parses the process arguments over the defaults `lights` and
     /// `width x height`, [`DEFAULT_THRESHOLD`] and `out/`; prints the usage
     /// and exits on a malformed or unknown flag.
-    pub fn parse(lights: usize, (width, height): (u32, u32)) -> Options {
+    pub fn parse(lights: usize, size: (u32, u32)) -> Options {
+        Self::parse_from(lights, size, std::env::args().skip(1))
+    }
+
+    /// [`parse`](Self::parse) over the arguments `args` (without the
+    /// program's name), for an example that takes flags of its own out
+    /// first.
+    pub fn parse_from(
+        lights: usize,
+        (width, height): (u32, u32),
+        args: impl IntoIterator<Item = String>,
+    ) -> Options {
         let mut options = Options {
             lights,
             width,
@@ -32,7 +43,7 @@ impl Options {
             threshold: DEFAULT_THRESHOLD,
             out: PathBuf::from("out"),
         };
-        let mut args = std::env::args().skip(1);
+        let mut args = args.into_iter();
         while let Some(flag) = args.next() {
             let value = args.next().unwrap_or_default();
             let ok = match flag.as_str() {

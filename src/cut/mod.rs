@@ -26,6 +26,7 @@
 //! [`Shader::bound`]: crate::shader::Shader::bound
 
 mod engine;
+mod entries;
 mod error_list;
 mod group;
 mod interpolate;
@@ -37,6 +38,8 @@ mod steering;
 mod threshold;
 
 pub(crate) use engine::{Cut, Outcome};
+pub(crate) use entries::settle_point;
+pub(crate) use error_list::{ErrorList, Seen};
 pub(crate) use group::{GroupCut, GroupScratch, Shared, Spend};
 #[cfg(test)]
 pub(crate) use lights::shade_small_scene;

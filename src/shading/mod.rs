@@ -174,6 +174,89 @@ impl<'t, S: Shader> Shading<'t, S> {
     }
 }
 
+impl<S: Shader> Shading<'_, S> {
+    /// An unbiased estimate of the radiance at `query`, with an unbiased
+    /// estimate of its variance: a certified cut at `threshold` (a coarse
+    /// one, say a relative 10% to 30%), then two lights sampled inside each
+    /// node it leaves, as [`LightSampler`](crate::LightSampler) descends
+    /// the tree from that node (Stochastic Lightcuts, Yuksel 2019, with the
+    /// cut's own certified bounds choosing the cut). What the cut settled
+    /// it sums exactly (lights in `f64`; no coarse `f32` sums, no
+    /// interpolation); each node's two samples `f / p` are averaged. The
+    /// result's expectation is the exact model with the host's visibility:
+    /// unbiased, *not* certified (see [`Stochastic`](crate::Stochastic)).
+    ///
+    /// `uniform` supplies the random numbers, independent and uniform in
+    /// `[0, 1)` (clamped into it, NaN read as 0): two per node sampled. A
+    /// sampled light that contributes, in a node the host has not said is
+    /// visible, costs one point-to-point query
+    /// ([`Visibility::visible`]). Without occluders pass [`Unoccluded`].
+    ///
+    /// ```
+    /// use glam::Vec3;
+    /// use manylights::{Lambert, LightTree, PointLight, Query, Threshold, Unoccluded};
+    ///
+    /// let lights: Vec<PointLight> = (0..5000)
+    ///     .map(|i| PointLight::new(Vec3::new((i % 70) as f32, (i / 70) as f32, 3.0), Vec3::ONE))
+    ///     .collect();
+    /// let tree = LightTree::build(&lights)?;
+    /// let mut shading = tree.shading(Lambert::new(Vec3::splat(0.8)));
+    /// let query = Query::new(Vec3::new(30.0, 30.0, 0.0), Vec3::Z)?;
+    /// let mut state = 1u64;
+    /// let mut uniform = move || {
+    ///     // Any uniform generator; a renderer passes its sampler's numbers.
+    ///     state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    ///     (state >> 11) as f64 / (1u64 << 53) as f64
+    /// };
+    /// // The mean of 64 calls, and its variance from the reported ones.
+    /// let (mut sum, mut variance) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
+    /// for _ in 0..64 {
+    ///     let r = shading.shade_stochastic(&query, Threshold::relative(0.2), Unoccluded, &mut uniform)?;
+    ///     (sum, variance) = (sum + r.radiance, variance + r.variance);
+    /// }
+    /// let (mean, sigma) = (sum / 64.0, (variance.max_element() / (64.0 * 64.0)).sqrt());
+    /// let exact = shading.exact_query(&query, Unoccluded);
+    /// // Within five standard deviations, almost surely.
+    /// assert!((mean - exact).abs().max_element() <= 5.0 * sigma + 1e-9 * exact.max_element());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// [`ShadeError::InvalidThreshold`] (NaN or negative threshold),
+    /// [`ShadeError::InvalidBand`] (bad interpolation band; the band is
+    /// otherwise ignored).
+    pub fn shade_stochastic<M, V: Visibility>(
+        &mut self,
+        query: &Query<M>,
+        threshold: Threshold,
+        visibility: V,
+        mut uniform: impl FnMut() -> f64,
+    ) -> Result<crate::Stochastic, ShadeError>
+    where
+        S: Accepts<M>,
+    {
+        threshold.check()?;
+        let (tree, shader) = (self.tree, &self.shader);
+        let list = &mut self.scratch.point.list;
+        let (surface, point) = (query.surface(), query.point());
+        Ok(crate::dispatch::with_avx2(
+            #[inline(always)]
+            || {
+                crate::sampling::shade_stochastic(
+                    tree,
+                    shader,
+                    surface,
+                    point,
+                    &threshold,
+                    visibility,
+                    list,
+                    &mut uniform,
+                )
+            },
+        ))
+    }
+}
+
 impl<S: ViewIndependent> Shading<'_, S> {
     /// Shades `point` with normal `normal` (any non-zero length; normalized
     /// here), with no occluders: [`shade_query`](Self::shade_query) in one

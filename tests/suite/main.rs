@@ -12,6 +12,8 @@
 //!   infinite thresholds, budgets, refits of the wrong size).
 //! * `cliffs`: hostile scenes, by their evaluation counts.
 //! * `no_alloc`: a warmed session shades without allocating.
+//! * `sampling`: the light sampler and the stochastic cut: probabilities,
+//!   frequencies (chi-square) and unbiasedness.
 
 mod batch;
 mod bound;
@@ -22,5 +24,6 @@ mod ggx;
 mod grazing;
 mod interpolation;
 mod no_alloc;
+mod sampling;
 mod stability;
 mod visibility;

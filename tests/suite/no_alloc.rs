@@ -117,3 +117,61 @@ fn shading_does_not_allocate_once_warmed() {
         after - before
     );
 }
+
+#[test]
+fn sampling_does_not_allocate_once_warmed() {
+    let lights: Vec<_> = (0..20_000)
+        .map(|i| {
+            let (x, y) = ((i % 200) as f32, (i / 200) as f32);
+            PointLight::new(Vec3::new(x, y, 5.0 + (i % 5) as f32 * 0.4), Vec3::ONE)
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let lambert = Lambert::new(Vec3::splat(0.7));
+    let glossy = Combined::new(Lambert::new(Vec3::splat(0.5)), Phong::new(Vec3::ONE, 80.0));
+    let diffuse = tree.sampler(lambert);
+    let shiny = tree.sampler(glossy);
+    let mut shading = tree.shading(lambert);
+    let queries: Vec<_> = (0..64)
+        .map(|i| {
+            Query::new(Vec3::new(i as f32 * 3.0, 100.0 - i as f32, 0.0), Vec3::Z)
+                .unwrap()
+                .with_view(Vec3::new(0.3, 0.2, 1.0))
+                .unwrap()
+        })
+        .collect();
+    let mut state = 0.0f64;
+    let mut uniform = move || {
+        // The golden-ratio sequence: enough spread, no allocation.
+        state = (state + 0.618_033_988_749_895) % 1.0;
+        state
+    };
+    let mut run = |check: &mut f64| {
+        for query in &queries {
+            for _ in 0..8 {
+                if let Some(s) = diffuse.sample(query, uniform()) {
+                    *check += s.pmf + diffuse.pmf(query, s.light);
+                }
+                if let Some(s) = shiny.sample(query, uniform()) {
+                    *check += s.pmf + shiny.pmf(query, s.light);
+                }
+            }
+            let r = shading
+                .shade_stochastic(query, Threshold::relative(0.2), Unoccluded, &mut uniform)
+                .unwrap();
+            *check += r.radiance.x;
+        }
+    };
+    let mut check = 0.0;
+    run(&mut check);
+    let before = allocations();
+    run(&mut check);
+    let after = allocations();
+    assert!(check > 0.0);
+    assert_eq!(
+        after - before,
+        0,
+        "sampling allocated {} times",
+        after - before
+    );
+}
