@@ -42,6 +42,14 @@ pub enum BuildError {
         /// The supported maximum.
         max: usize,
     },
+    /// A light's [`Emission`](crate::Emission) profile is out of range.
+    #[error("light {index}: emission {reason}")]
+    InvalidEmission {
+        /// Index of the light in the slice given to the builder.
+        index: usize,
+        /// What is out of range.
+        reason: &'static str,
+    },
     /// A builder option is out of its range.
     #[error("invalid builder option: {0}")]
     InvalidOption(&'static str),

@@ -171,6 +171,7 @@
 mod combined;
 mod cut;
 mod dispatch;
+mod emission;
 mod error;
 mod geometry;
 mod ggx;
@@ -190,6 +191,7 @@ mod visibility;
 pub use combined::Combined;
 pub use cut::{ShadeResult, Stop, Target, Threshold};
 pub use error::{BuildError, ShadeError, ValidationError};
+pub use emission::{Emission, Emitter};
 pub use geometry::Aabb;
 pub use ggx::Ggx;
 pub use lambert::{BoundKind, Lambert};

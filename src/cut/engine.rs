@@ -531,9 +531,14 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
         if node.radius == 0.0 {
             // A single light, or coincident lights (the build makes them one
             // leaf): exactly one light of the summed intensity at the
-            // centroid, whatever their number.
+            // centroid, whatever their number; coincident emitters, whose
+            // profiles may differ, one by one.
             let seen = seen(Self::known(visible));
-            R::light(self, index, node.centroid, node.intensity, seen, weight);
+            if self.tree.is_oriented() {
+                R::lights(self, index, node.lights(), seen, weight);
+            } else {
+                R::light(self, index, node.centroid, node.intensity, seen, weight);
+            }
             return Admitted::Done;
         }
         self.work.nodes += 1;

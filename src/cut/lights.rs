@@ -133,6 +133,62 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
         }
     }
 
+    /// Each light of `range` (leaf order) of a tree of emitters, times
+    /// `weight`: its exact term times its profile's value (crate docs, "The
+    /// model"), [`SUM_LIGHTS_MAX`] lights at a time. Lights whose profile
+    /// is 0 at the point are neither evaluated (nor counted as evaluated)
+    /// nor asked about; the host is asked about the others of unknown
+    /// visibility together.
+    #[inline(always)]
+    pub(crate) fn sum_emitters(&mut self, range: core::ops::Range<usize>, seen: Seen, weight: f64) {
+        const CHUNK: usize = SUM_LIGHTS_MAX;
+        let tree = self.tree;
+        let Some(orientation) = tree.orientation.as_deref() else {
+            return self.sum_lights(range, seen, weight);
+        };
+        let p = self.region.surface.point;
+        let mut lit = [PointLight::default(); CHUNK];
+        let mut factors = [0.0f64; CHUNK];
+        let mut values = [DVec3::ZERO; CHUNK];
+        let lights = tree.lights[range.clone()].chunks(CHUNK);
+        let profiles = orientation.profiles[range].chunks(CHUNK);
+        for (lights, profiles) in lights.zip(profiles) {
+            let mut n = 0;
+            for (light, profile) in lights.iter().zip(profiles) {
+                let f = profile.factor(light.position, p);
+                if f > 0.0 {
+                    lit[n] = *light;
+                    factors[n] = f;
+                    n += 1;
+                }
+            }
+            if n == 0 {
+                continue;
+            }
+            // Counted as evaluated: the lights whose terms are.
+            self.work.lights += n as u32;
+            let values = &mut values[..n];
+            self.shader
+                .eval_lights(&self.region.per_point, self.region.surface, &lit[..n], values);
+            for (value, f) in values.iter_mut().zip(&factors) {
+                *value *= *f;
+            }
+            if seen == Seen::Visible || V::ALWAYS_VISIBLE {
+                for value in values.iter() {
+                    self.region.settled.add(*value * weight);
+                }
+            } else {
+                let (asked, which, seen) =
+                    self.ask_together(&lit[..n], |k, _| values[k] != DVec3::ZERO);
+                for (&k, &seen) in which[..asked].iter().zip(&seen[..asked]) {
+                    if seen {
+                        self.region.settled.add(values[usize::from(k)] * weight);
+                    }
+                }
+            }
+        }
+    }
+
     /// [`settle_light`](Self::settle_light) for each of `lights` (at most
     /// [`SUM_LIGHTS_MAX`]) of unknown visibility, with their exact
     /// contributions `values`: the host is asked about those that

@@ -43,7 +43,7 @@ pub(crate) use error_list::{ErrorList, Seen};
 pub(crate) use group::{GroupCut, GroupScratch, Shared, Spend};
 #[cfg(test)]
 pub(crate) use lights::shade_small_scene;
-pub(crate) use point::{Lent, PointScratch, reported_bound, shade_point};
+pub(crate) use point::{Lent, PointScratch, emitted, reported_bound, shade_point};
 pub use result::{ShadeResult, Stop};
 pub(crate) use steering::{SAMPLES, Samples, Spread};
 pub use threshold::{Target, Threshold};

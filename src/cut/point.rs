@@ -17,6 +17,7 @@ use crate::LightLanes;
 use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, SUM_SLACK};
 use crate::shader::{ChildrenOf, NodeEstimate, Seal, Shader};
+use crate::tree::orientation::Factor;
 use crate::tree::{LightTree, NO_PLANE, Node};
 use crate::visibility::Visibility;
 
@@ -161,7 +162,11 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
         seen: Seen,
         weight: f64,
     ) {
-        cut.sum_lights(range, seen, weight);
+        if cut.tree.is_oriented() {
+            cut.sum_emitters(range, seen, weight);
+        } else {
+            cut.sum_lights(range, seen, weight);
+        }
     }
 
     #[inline(always)]
@@ -174,11 +179,16 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
         let node = &cut.tree.nodes[index];
         match node.cone(cut.region.surface.point) {
             Some(cone) => {
+                let factor = cut.tree.factor(index, &cone);
+                if factor.upper == 0.0 {
+                    // Every member aimed away from the point.
+                    return None;
+                }
                 let region = &cut.region;
                 let bound = cut
                     .shader
                     .bound(&region.per_point, region.surface, node, &cone);
-                cut.bounded(index, visible, weight, &bound)
+                cut.bounded(index, visible, weight, &emitted(bound, factor))
             }
             None => Some(cut.unbounded(index, visible)),
         }
@@ -199,7 +209,8 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
         let tree = cut.tree;
         let first = tree.nodes[parent].first_child as usize;
         let lanes = (0..CHILDREN).filter(|i| wanted & (1 << i) != 0);
-        if cut.region.coarse.is_some() && cut.work.nodes <= COARSE_NODES_MAX {
+        let oriented = tree.is_oriented();
+        if cut.region.coarse.is_some() && cut.work.nodes <= COARSE_NODES_MAX && !oriented {
             let mut bounds = [None; CHILDREN];
             let region = &cut.region;
             let children = ChildrenOf {
@@ -229,7 +240,14 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
         for i in lanes {
             let child = first + i;
             match tree.nodes[child].cone(cut.region.surface.point) {
-                Some(cone) => cut.region.children.push(child as u32, cone),
+                Some(cone) if oriented => {
+                    let factor = tree.factor(child, &cone);
+                    // A child whose members all aim away is exactly 0.
+                    if factor.upper > 0.0 {
+                        cut.region.children.push(child as u32, cone, factor);
+                    }
+                }
+                Some(cone) => cut.region.children.push(child as u32, cone, Factor::ONE),
                 None => pending.pending(cut.unbounded(child, visible)),
             }
         }
@@ -436,11 +454,13 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
             &mut children.bounds[..len],
         );
         children.len = 0;
+        let oriented = tree.is_oriented();
         for i in 0..len {
-            let (index, bound) = (
-                self.region.children.indices[i],
-                self.region.children.bounds[i],
-            );
+            let children = &self.region.children;
+            let (index, mut bound) = (children.indices[i], children.bounds[i]);
+            if oriented {
+                bound = emitted(bound, children.factors[i]);
+            }
             if let Some(entry) = self.bounded(index as usize, visible, weight, &bound) {
                 pending.pending(entry);
             }
@@ -451,11 +471,28 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
 /// The most children bounded together: an octree's.
 const CHILDREN: usize = 8;
 
+/// The certified bound of a node of emitters whose isotropic bound (the
+/// shader's, for the same lights emitting alike in every direction) is
+/// `bound` and whose members' profile values at the point lie within
+/// `factor`: each member's term is its isotropic term (non-negative) times
+/// its profile's value, so the node's sum lies within the isotropic
+/// interval scaled by the factor's ends.
+#[inline(always)]
+pub(crate) fn emitted(bound: NodeEstimate, factor: Factor) -> NodeEstimate {
+    NodeEstimate::new(
+        bound.estimate * factor.estimate,
+        bound.lower * factor.lower,
+        bound.upper * factor.upper,
+    )
+}
+
 /// Children of a node waiting to be bounded together.
 struct Children {
     len: usize,
     indices: [u32; CHILDREN],
     cones: [Cone; CHILDREN],
+    /// Their emission factors (see [`emitted`]).
+    factors: [Factor; CHILDREN],
     /// Their bounds, once bounded.
     bounds: [NodeEstimate; CHILDREN],
 }
@@ -476,6 +513,7 @@ impl Default for Children {
             len: 0,
             indices: [0; CHILDREN],
             cones: [NONE; CHILDREN],
+            factors: [Factor::ONE; CHILDREN],
             bounds: [NodeEstimate::ZERO; CHILDREN],
         }
     }
@@ -483,9 +521,10 @@ impl Default for Children {
 
 impl Children {
     #[inline(always)]
-    fn push(&mut self, index: u32, cone: Cone) {
+    fn push(&mut self, index: u32, cone: Cone, factor: Factor) {
         self.indices[self.len] = index;
         self.cones[self.len] = cone;
+        self.factors[self.len] = factor;
         self.len += 1;
     }
 }

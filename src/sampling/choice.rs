@@ -10,6 +10,7 @@
 use glam::{DVec3, Vec3};
 
 use crate::geometry::{Cone, Surface};
+use crate::cut::emitted;
 use crate::shader::{ChildrenOf, NodeEstimate, SUM_LIGHTS_MAX, Seal, Shader};
 use crate::tree::{LightTree, MAX_CHILDREN, Node};
 
@@ -164,6 +165,12 @@ fn admit<S: Shader>(at: &At<'_, S>, index: usize) -> Kind {
     {
         return Kind::Dark;
     }
+    if node.radius == 0.0 && at.tree.is_oriented() {
+        // Coincident emitters: their profiles may differ.
+        let mut sum = 0.0;
+        each_light(at, node.lights(), |_, value| sum += value);
+        return exact(sum);
+    }
     if node.radius == 0.0 {
         // Coincident lights (or one): one light of the summed intensity at
         // the centroid, as the cut takes them.
@@ -188,6 +195,7 @@ pub(crate) fn start_is_dark<S: Shader>(at: &At<'_, S>, index: usize) -> bool {
             let node = &at.tree.nodes[index];
             node.cone(at.surface.point).is_some_and(|cone| {
                 let bound = at.shader.bound(&at.per_point, at.surface, node, &cone);
+                let bound = emitted(bound, at.tree.factor(index, &cone));
                 bounded(&bound) == Kind::Dark
             })
         }
@@ -509,9 +517,10 @@ fn bound_wanted<S: Shader>(
         parent,
         wanted,
     };
-    if at
-        .shader
-        .bound_children_coarse(Seal, &at.per_point, at.surface, children, &mut coarse)
+    if !tree.is_oriented()
+        && at
+            .shader
+            .bound_children_coarse(Seal, &at.per_point, at.surface, children, &mut coarse)
     {
         for i in bits {
             kind[i] = match &coarse[i] {
@@ -543,8 +552,9 @@ fn bound_wanted<S: Shader>(
         &cones[..len],
         &mut bounds[..len],
     );
-    for (slot, bound) in slots[..len].iter().zip(&bounds[..len]) {
-        kind[*slot] = bounded(bound);
+    for (k, (slot, bound)) in slots[..len].iter().zip(&bounds[..len]).enumerate() {
+        let bound = emitted(*bound, tree.factor(first + *slot, &cones[k]));
+        kind[*slot] = bounded(&bound);
     }
 }
 
@@ -572,12 +582,18 @@ fn each_light<S: Shader>(
 ) {
     let mut values = [DVec3::ZERO; SUM_LIGHTS_MAX];
     let mut index = range.start;
-    for lights in at.tree.lights[range].chunks(SUM_LIGHTS_MAX) {
+    let tree = at.tree;
+    for lights in tree.lights[range].chunks(SUM_LIGHTS_MAX) {
         let values = &mut values[..lights.len()];
         at.shader
             .eval_lights(&at.per_point, at.surface, lights, values);
-        for value in values.iter() {
-            f(index, scalar(*value));
+        for (light, value) in lights.iter().zip(values.iter()) {
+            let value = if tree.is_oriented() {
+                *value * tree.profile(index).factor(light.position, at.surface.point)
+            } else {
+                *value
+            };
+            f(index, scalar(value));
             index += 1;
         }
     }

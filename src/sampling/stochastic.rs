@@ -80,13 +80,14 @@ pub(crate) fn shade_stochastic<S: Shader, V: Visibility>(
                 continue;
             };
             lights += 1;
+            let profile = tree.profile(light);
             let light = &tree.lights[light];
             let f = shader.eval(
                 &at.per_point,
                 surface,
                 light.position.as_dvec3(),
                 light.intensity.as_dvec3(),
-            );
+            ) * profile.factor(light.position, surface.point);
             if f == DVec3::ZERO {
                 continue;
             }

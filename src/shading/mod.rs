@@ -66,7 +66,9 @@ impl LightTree {
         Shading {
             tree: self,
             shader,
-            small_lanes: is_small_scene(self).then(|| LightLanes::of(&self.lights)),
+            // Emitters are summed with their profiles, never side by side.
+            small_lanes: (is_small_scene(self) && !self.is_oriented())
+                .then(|| LightLanes::of(&self.lights)),
             scratch: Scratch::default(),
         }
     }
@@ -168,7 +170,7 @@ impl<'t, S: Shader> Shading<'t, S> {
             &self.shader,
             query.surface(),
             query.point(),
-            &self.tree.lights,
+            self.tree,
             visibility,
         )
     }

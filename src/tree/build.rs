@@ -12,6 +12,7 @@ use super::node::Node;
 use super::options::TreeBuilder;
 use super::pool::Pool;
 use super::statistics_pass::fill_nodes;
+use crate::emission::{Emitter, Kind, Profile};
 use crate::geometry::Aabb;
 use crate::{BuildError, PointLight};
 
@@ -26,6 +27,56 @@ impl LightTree {
     /// out-of-range position, or a non-finite or negative intensity channel.
     pub fn build(lights: &[PointLight]) -> Result<Self, BuildError> {
         TreeBuilder::new().build(lights)
+    }
+
+    /// Builds a tree of lights with emission profiles (spot lights, virtual
+    /// point lights; see [`Emission`](crate::Emission)) with the default
+    /// options of [`TreeBuilder`]. Every shading call, bound and the exact
+    /// reference then use each light's profile.
+    ///
+    /// A slice whose every light is isotropic gives the tree
+    /// [`build`](Self::build) gives of its lights, bit for bit, with no
+    /// memory for profiles.
+    ///
+    /// ```
+    /// use glam::Vec3;
+    /// use manylights::{Emission, Lambert, LightTree, PointLight, Threshold};
+    ///
+    /// // Street lamps aimed at the ground: glTF spots, 20 and 40 degrees.
+    /// let lamps: Vec<_> = (0..400)
+    ///     .map(|i| {
+    ///         let at = Vec3::new((i % 20) as f32 * 10.0, (i / 20) as f32 * 10.0, 6.0);
+    ///         let spot = Emission::spot(Vec3::NEG_Z, 20f32.to_radians(), 40f32.to_radians());
+    ///         PointLight::new(at, Vec3::splat(50.0)).with_emission(spot)
+    ///     })
+    ///     .collect();
+    /// let tree = LightTree::build_emitters(&lamps)?;
+    /// let mut shading = tree.shading(Lambert::new(Vec3::splat(0.5)));
+    /// let (p, n) = (Vec3::new(52.0, 48.0, 0.0), Vec3::Z);
+    /// let r = shading.shade(p, n, Threshold::relative(0.01))?;
+    /// assert!(r.certifies(shading.exact(p, n)?));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// # Errors
+    /// As [`build`](Self::build), and [`BuildError::InvalidEmission`] for a
+    /// profile out of range (a zero or non-finite axis, an exponent outside
+    /// `[0, 1e4]`, spot angles outside `0 <= inner <= outer <= pi/2`,
+    /// `outer > 0`), naming the first such light.
+    pub fn build_emitters(emitters: &[Emitter]) -> Result<Self, BuildError> {
+        TreeBuilder::new().build_emitters(emitters)
+    }
+
+    /// Rebuilds this tree over `emitters` with the options it was built
+    /// with, in the memory it holds: the tree
+    /// [`build_emitters`](Self::build_emitters) gives.
+    ///
+    /// # Errors
+    /// As [`build_emitters`](Self::build_emitters); the tree is then left
+    /// as it was.
+    pub fn rebuild_emitters(&mut self, emitters: &[Emitter]) -> Result<(), BuildError> {
+        let options = self.options;
+        options.rebuild_emitters(self, emitters)
     }
 
     /// A builder carrying the options (maximum lights per leaf, maximum depth).
@@ -92,6 +143,58 @@ impl TreeBuilder {
         self.build_on(lights, Pool::ONE)
     }
 
+    /// Builds the tree of lights with emission profiles (see
+    /// [`LightTree::build_emitters`]): as [`build`](Self::build), the
+    /// lights split by the direction of their axes first where
+    /// [`group_by_axis`](Self::group_by_axis) says so, and each node
+    /// bounding its members' axes and profiles.
+    ///
+    /// # Errors
+    /// As [`LightTree::build_emitters`].
+    pub fn build_emitters(&self, emitters: &[Emitter]) -> Result<LightTree, BuildError> {
+        let mut tree = self.build_on(&[], Pool::ONE)?;
+        self.rebuild_emitters(&mut tree, emitters)?;
+        Ok(tree)
+    }
+
+    /// Rebuilds `tree` over `emitters` with these options, in the memory
+    /// the tree holds, as [`rebuild`](Self::rebuild) does for isotropic
+    /// lights.
+    ///
+    /// # Errors
+    /// As [`LightTree::build_emitters`]; the tree is then left as it was.
+    pub fn rebuild_emitters(
+        &self,
+        tree: &mut LightTree,
+        emitters: &[Emitter],
+    ) -> Result<(), BuildError> {
+        let mut profiles = Vec::with_capacity(emitters.len());
+        for (index, e) in emitters.iter().enumerate() {
+            let profile = e
+                .emission
+                .profile()
+                .map_err(|reason| BuildError::InvalidEmission { index, reason })?;
+            profiles.push(profile);
+        }
+        let lights: Vec<PointLight> = emitters.iter().map(|e| e.light).collect();
+        if profiles.iter().all(|p| p.kind == Kind::Isotropic) {
+            return self.build_into(tree, &lights, None, Pool::ONE);
+        }
+        let classes: Option<Vec<u8>> = self
+            .group_by_axis
+            .then(|| profiles.iter().map(axis_class).collect());
+        self.build_into(tree, &lights, classes.as_deref(), Pool::ONE)?;
+        let order = &tree.order;
+        let mut orientation = tree.orientation.take().unwrap_or_default();
+        orientation.profiles.clear();
+        orientation
+            .profiles
+            .extend(order.iter().map(|&k| profiles[k as usize]));
+        tree.orientation = Some(orientation);
+        tree.fill_cones();
+        Ok(())
+    }
+
     /// [`build`](Self::build) spread over rayon's thread pool (with the
     /// `rayon` feature): the same tree, bit for bit, and the same errors.
     ///
@@ -135,7 +238,7 @@ impl TreeBuilder {
     /// As [`build`](Self::build); the tree is then left as it was (the
     /// lights are checked before it is touched).
     pub fn rebuild(&self, tree: &mut LightTree, lights: &[PointLight]) -> Result<(), BuildError> {
-        self.build_into(tree, lights, Pool::ONE)
+        self.build_into(tree, lights, None, Pool::ONE)
     }
 
     /// [`rebuild`](Self::rebuild) spread over rayon's thread pool (with the
@@ -150,7 +253,7 @@ impl TreeBuilder {
         tree: &mut LightTree,
         lights: &[PointLight],
     ) -> Result<(), BuildError> {
-        self.build_into(tree, lights, Pool::for_lights(lights.len()))
+        self.build_into(tree, lights, None, Pool::for_lights(lights.len()))
     }
 
     fn build_on(&self, lights: &[PointLight], pool: Pool) -> Result<LightTree, BuildError> {
@@ -163,17 +266,21 @@ impl TreeBuilder {
             node_planes: Vec::new(),
             groups: Default::default(),
             options: *self,
+            orientation: None,
         };
-        self.build_into(&mut tree, lights, pool)?;
+        self.build_into(&mut tree, lights, None, pool)?;
         Ok(tree)
     }
 
     /// Builds the tree of `lights` into `tree`, reusing its memory; `tree`
-    /// is left as it was on an error.
+    /// is left as it was on an error. With `classes` (one per light), the
+    /// lights are split by class first (see [`axis_class`]); the caller
+    /// then sets the tree's orientation, which this leaves empty.
     fn build_into(
         &self,
         tree: &mut LightTree,
         lights: &[PointLight],
+        classes: Option<&[u8]>,
         pool: Pool,
     ) -> Result<(), BuildError> {
         if self.max_leaf_lights == 0 {
@@ -189,6 +296,15 @@ impl TreeBuilder {
         let scene = check_and_bound(lights, pool.cheap(lights.len()))?;
 
         let n = lights.len();
+        // Kept for its memory; the caller refills it for emitters.
+        if let Some(o) = tree.orientation.as_mut() {
+            o.profiles.clear();
+            o.cones.clear();
+        }
+        let kept = tree.orientation.take();
+        if classes.is_some() {
+            tree.orientation = kept;
+        }
         tree.options = *self;
         tree.depth = 0;
         if n == 0 {
@@ -201,7 +317,7 @@ impl TreeBuilder {
             return Ok(());
         }
         let cheap = pool.cheap(n);
-        let levels = sort_lights(tree, lights, scene, cheap);
+        let levels = sort_lights(tree, lights, classes, scene, cheap);
         // Breadth-first: children of a node are appended together, so they
         // are contiguous. The shape comes first, in compact records (lights
         // and children of each node, and its depth); the nodes are made
@@ -272,9 +388,23 @@ impl TreeBuilder {
 /// and every later pass over a node's lights reads memory in sequence.
 /// Returns the split levels of the sorted codes (see
 /// [`morton::split_levels`]).
-fn sort_lights(tree: &mut LightTree, lights: &[PointLight], scene: Aabb, pool: Pool) -> Vec<u8> {
+fn sort_lights(
+    tree: &mut LightTree,
+    lights: &[PointLight],
+    classes: Option<&[u8]>,
+    scene: Aabb,
+    pool: Pool,
+) -> Vec<u8> {
     let grid = morton::Grid::over(scene);
-    let unsorted = grid.codes_of(lights, pool);
+    let mut unsorted = grid.codes_of(lights, pool);
+    if let Some(classes) = classes {
+        // The class takes the codes' top digit (the root's split); the
+        // cells below lose their finest level, which median splits make
+        // up for.
+        for (code, &class) in unsorted.iter_mut().zip(classes) {
+            *code = u64::from(class) << 60 | *code >> 3;
+        }
+    }
     // Median splits reorder lights within a run of equal codes only, so
     // the sorted codes stay valid for every run.
     let codes = morton::sort_into(&unsorted, pool, &mut tree.order);
@@ -287,6 +417,25 @@ fn sort_lights(tree: &mut LightTree, lights: &[PointLight], scene: Aabb, pool: P
     // sequence) rather than searched for in the codes, whose reads at
     // each node's ends would miss the cache.
     morton::split_levels(&codes)
+}
+
+/// The class of a profile's axis for [`TreeBuilder::group_by_axis`]: its
+/// dominant coordinate and sign (0 to 5), two-sided axes taken pointing
+/// into the positive half of that coordinate; isotropic lights form class 6.
+fn axis_class(p: &Profile) -> u8 {
+    if p.kind == Kind::Isotropic {
+        return 6;
+    }
+    let a = p.axis;
+    let abs = a.abs();
+    let (axis, value) = if abs.x >= abs.y && abs.x >= abs.z {
+        (0, a.x)
+    } else if abs.y >= abs.z {
+        (1, a.y)
+    } else {
+        (2, a.z)
+    };
+    2 * axis + u8::from(value < 0.0 && !p.two_sided)
 }
 
 /// Halves a run of lights (and their original indices, kept in step) at

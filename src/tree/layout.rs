@@ -33,6 +33,10 @@ pub struct LightTree {
     pub(crate) groups: NodeGroups,
     /// The options it was built with, for [`rebuild`](Self::rebuild).
     pub(crate) options: TreeBuilder,
+    /// The lights' emission profiles and the nodes' orientation bounds;
+    /// `None` for a tree of isotropic lights, which stores nothing for
+    /// them.
+    pub(crate) orientation: Option<Box<super::orientation::Orientation>>,
 }
 
 /// A node whose lights are not known to lie in one plane.
@@ -123,6 +127,10 @@ impl LightTree {
             + self.planes.capacity() * size_of::<[u32; 3]>()
             + self.node_planes.capacity() * size_of::<u32>()
             + self.groups.memory_bytes()
+            + self
+                .orientation
+                .as_ref()
+                .map_or(0, |o| size_of::<super::orientation::Orientation>() + o.memory_bytes())
     }
 }
 

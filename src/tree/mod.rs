@@ -18,6 +18,8 @@
 //! * [`check`]: the checks of the lights before a build or refit;
 //! * [`groups`]: every node's children side by side, in blocks;
 //! * [`layout`]: the tree's storage ([`LightTree`]);
+//! * [`orientation`]: the lights' emission profiles and each node's bound
+//!   on its members' axes;
 //! * [`plane`]: nodes whose lights lie exactly in one tilted plane;
 //! * [`statistics_pass`]: every node's statistics, bottom-up, and what
 //!   follows from them;
@@ -36,6 +38,7 @@ pub(crate) mod morton;
 mod node;
 mod notes;
 mod options;
+pub(crate) mod orientation;
 mod plane;
 mod pool;
 mod prefetch;

@@ -12,6 +12,8 @@
 //!   infinite thresholds, budgets, refits of the wrong size).
 //! * `cliffs`: hostile scenes, by their evaluation counts.
 //! * `no_alloc`: a warmed session shades without allocating.
+//! * `emitters`: oriented emitters (lobes, spots) in every shading path,
+//!   against the exact sum; stiff cases of the profiles.
 //! * `sampling`: the light sampler and the stochastic cut: probabilities,
 //!   frequencies (chi-square) and unbiasedness.
 
@@ -20,6 +22,7 @@ mod bound;
 mod cliffs;
 mod common;
 mod contract;
+mod emitters;
 mod ggx;
 mod grazing;
 mod interpolation;

@@ -192,6 +192,9 @@ impl<S: Shader> Shading<'_, S> {
         let Some(kd) = self.shader.diffuse_albedo(Seal) else {
             return Err(TooCostly);
         };
+        if self.tree.is_oriented() {
+            return Err(TooCostly);
+        }
         crate::dispatch::with_avx2(
             #[inline(always)]
             || self.shared_cut(queries, members, threshold, visibility, stats, kd),
