@@ -31,22 +31,25 @@ use super::point::reported_bound;
 use super::policy::{ENTRIES_PER_BOUND, MAX_SHARED_ENTRIES};
 use super::steering::{SAMPLES, Samples, Spread, darkest};
 use super::threshold::Threshold;
+use crate::emission::Profile;
 use crate::geometry::{Aabb, Cone, GroupBounds, GroupView, Side};
 use crate::numeric::{CompensatedSum, POINT_SLACK, SERIES_SLACK};
 use crate::shader::{Seal, Shader};
-use crate::tree::{MAX_CHILDREN, Node};
+use crate::tree::orientation::Factor;
+use crate::tree::{LightTree, MAX_CHILDREN, Node};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 
 /// What a group's cut keeps between calls: the list, and what the points
 /// sum besides the waiting nodes.
 #[derive(Debug, Default)]
 pub(crate) struct GroupScratch {
-    /// Single lights on both sides of some tangent plane, evaluated
-    /// exactly at each point: position and intensity.
-    pub(crate) across: Vec<(DVec3, DVec3)>,
+    /// Single lights on both sides of some tangent plane, or emitters
+    /// whose profile varies over the group, evaluated exactly at each
+    /// point: position, intensity and profile.
+    pub(crate) across: Vec<(DVec3, DVec3, Profile)>,
     /// Single lights the host saw partially from the group: asked
     /// point-to-point and evaluated exactly at each point.
-    pub(crate) shadowed: Vec<(DVec3, DVec3)>,
+    pub(crate) shadowed: Vec<(DVec3, DVec3, Profile)>,
     /// Single lights above every tangent plane: position, intensity times
     /// `kd`.
     pub(crate) above: Vec<(DVec3, DVec3)>,
@@ -149,6 +152,42 @@ impl<'s> Shared<'s> {
         }
     }
 
+    /// The emission bounds of node `index` over the group
+    /// ([`LightTree::group_factor`]): the factor its estimate at each
+    /// point takes.
+    #[inline(always)]
+    pub(crate) fn node_factor(&self, tree: &LightTree, index: usize) -> Factor {
+        if tree.is_oriented() {
+            tree.group_factor(index, self.group.centre, self.group.radius)
+        } else {
+            Factor::ONE
+        }
+    }
+
+    /// A node's shared error `error` (of its diffuse estimate, as
+    /// [`Shader::group_errors`] bounds it) widened for its members'
+    /// emission profiles, whose values over the group lie in `factor`: each
+    /// point's estimate is its diffuse estimate `E` times
+    /// `factor.estimate`, and the node's exact sum `T` lies in `[lower (E -
+    /// e), upper (E + e)]` (each member's term is its isotropic term times
+    /// its profile's value), so `|T - estimate E| <= max(estimate - lower,
+    /// upper - estimate) (E + e) + upper e` with `E <= U + e`; `U` bounds
+    /// the isotropic sum at every point, `I kd / d^2` with `d` the least
+    /// distance from a point to the node's ball (`nearest`, the least
+    /// distance to its centroid, less its radius).
+    #[inline(always)]
+    fn emitted_error(&self, node: &Node, error: DVec3, factor: Factor, nearest: f64) -> DVec3 {
+        if factor == Factor::ONE {
+            return error;
+        }
+        let clearance = nearest - f64::from(node.radius);
+        let most = node.intensity * self.kd / (clearance * clearance);
+        let width = (factor.estimate - factor.lower).max(factor.upper - factor.estimate);
+        // Relative rounding of these few operations, far inside the
+        // allowance, widened outright.
+        (width * (most + 2.0 * error) + factor.upper * error) * (1.0 + 1e-12)
+    }
+
     /// The darkest sample's estimate of the cut.
     #[inline(always)]
     pub(crate) fn steering(&self) -> DVec3 {
@@ -167,8 +206,15 @@ impl<'s> Shared<'s> {
                 [DVec3::ZERO; SAMPLES]
             } else {
                 let node = &tree.nodes[e.node as usize];
+                let f = if tree.is_oriented() {
+                    let group = &self.group;
+                    tree.group_factor(e.node as usize, group.centre, group.radius)
+                        .estimate
+                } else {
+                    1.0
+                };
                 self.samples
-                    .values(node.centroid.as_dvec3(), node.intensity * self.kd)
+                    .values(node.centroid.as_dvec3(), node.intensity * (self.kd * f))
             };
             scratch.steer.push(values);
             for (sum, v) in self.steer_waiting.iter_mut().zip(values) {
@@ -269,7 +315,10 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
             None => return,
             Some(true) => {}
             Some(false) => {
-                cut.region.scratch.shadowed.push((position, intensity));
+                cut.region
+                    .scratch
+                    .shadowed
+                    .push((position, intensity, Profile::ISOTROPIC));
                 return;
             }
         }
@@ -287,7 +336,10 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
                 region.scratch.above.push((position, scaled));
             }
             // Evaluated by the shader at each point.
-            Side::Across(_) => region.scratch.across.push((position, intensity)),
+            Side::Across(_) => region
+                .scratch
+                .across
+                .push((position, intensity, Profile::ISOTROPIC)),
         }
         let values = region.samples.values(position, scaled);
         for (sum, v) in region.steer_settled.iter_mut().zip(values) {
@@ -306,6 +358,19 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
         let tree = cut.tree;
         for k in range {
             let l = tree.lights[k];
+            if tree.is_oriented() {
+                let group = &cut.region.group;
+                let f = tree.light_group_factor(k, group.centre, group.radius);
+                if f.upper == 0.0 {
+                    // Aimed away from every point of the group.
+                    continue;
+                }
+                if f.lower < 1.0 {
+                    cut.emitter(leaf, k, seen, weight, f.estimate);
+                    continue;
+                }
+                // Its profile is 1 at every point: an isotropic light.
+            }
             Self::light(cut, leaf, l.position, l.intensity.as_dvec3(), seen, weight);
         }
     }
@@ -322,8 +387,14 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
             Ok(None) => return None,
             Err(()) => None,
             Ok(Some((view, nearest, distance))) => {
+                let factor = cut.region.node_factor(cut.tree, index);
+                if factor.upper == 0.0 {
+                    // Every member aimed away from every point.
+                    return None;
+                }
                 cut.region.spread.note(nearest, distance);
-                Some(cut.shared_errors::<1>(&[node], &[view])?[0])
+                let error = cut.shared_errors::<1>(&[node], &[view])?[0];
+                Some(cut.region.emitted_error(node, error, factor, nearest))
             }
         };
         cut.shared_entry(index, visible, error)
@@ -354,6 +425,10 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
             *state = match cut.shared_view(node) {
                 Ok(None) => Child::Skip,
                 Err(()) => Child::Near,
+                Ok(Some(_)) if cut.region.node_factor(tree, first + k).upper == 0.0 => {
+                    // Every member aimed away from every point.
+                    Child::Skip
+                }
                 Ok(Some((view, nearest, distance))) => {
                     cut.region.spread.note(nearest, distance);
                     bounded[count] = (k, view);
@@ -369,6 +444,17 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
             _ => cut.errors_into::<8>(first, &mut states, &bounded[..count]),
         };
         debug_assert!(done, "a shader that shares cuts bounds nodes for groups");
+        if tree.is_oriented() {
+            for &(k, view) in &bounded[..count] {
+                let node = &tree.nodes[first + k];
+                let factor = cut.region.node_factor(tree, first + k);
+                if let Child::Bound(error) = &mut states[k] {
+                    *error = cut
+                        .region
+                        .emitted_error(node, *error, factor, 1.0 / view.inv_nearest);
+                }
+            }
+        }
         for (k, state) in states.iter().enumerate() {
             let error = match state {
                 Child::Skip => continue,
@@ -481,6 +567,58 @@ enum Child {
 }
 
 impl<'s, S: Shader, V: Visibility> Cut<'_, S, V, Shared<'s>> {
+    /// An emitter (light `light` of the tree, leaf order, of node `leaf`)
+    /// whose profile varies over the group: kept for each point to
+    /// evaluate with its profile (asked about point to point where the
+    /// host sees it partly), unless it is below every tangent plane or
+    /// hidden from the whole group; its value at the samples taken at
+    /// `estimate`, the profile's value the group's bound picked.
+    #[inline(always)]
+    fn emitter(&mut self, leaf: usize, light: usize, seen: Seen, weight: f64, estimate: f64) {
+        let tree = self.tree;
+        let l = tree.lights[light];
+        let intensity = l.intensity.as_dvec3() * weight;
+        if intensity == DVec3::ZERO {
+            return;
+        }
+        let position = l.position.as_dvec3();
+        let group = &self.region.group;
+        let offset = position - group.centre;
+        let height = group.normal.dot(offset);
+        if group.side_of(height, height, offset.length() + group.radius) == Side::Below {
+            return;
+        }
+        let here = NodeRegion {
+            index: leaf as u32,
+            aabb: Aabb {
+                min: l.position,
+                max: l.position,
+            },
+            centroid: l.position,
+            radius: 0.0,
+            light_count: 1,
+        };
+        let profile = tree.profile(light);
+        match self.ask(seen == Seen::Visible, &here, None) {
+            None => return,
+            Some(true) => self.region.scratch.across.push((position, intensity, profile)),
+            Some(false) => {
+                self.region
+                    .scratch
+                    .shadowed
+                    .push((position, intensity, profile));
+                return;
+            }
+        }
+        let region = &mut self.region;
+        let values = region
+            .samples
+            .values(position, intensity * (region.kd * estimate));
+        for (sum, v) in region.steer_settled.iter_mut().zip(values) {
+            *sum += v;
+        }
+    }
+
     /// Asks the host about `region` for the whole group, unless `visible`
     /// is known already; `None` when it is occluded, else whether it is
     /// visible. `node` (for a node rather than a single light) is counted

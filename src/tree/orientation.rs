@@ -177,17 +177,25 @@ impl NodeCone {
     /// exponent and cosines.
     #[inline]
     pub(crate) fn factor(&self, cone: &Cone) -> Factor {
+        let delta = cone.sin_half_angle.clamp(0.0, 1.0).asin();
+        self.factor_within(-cone.axis, delta)
+    }
+
+    /// [`factor`](Self::factor) for every direction from a member to a
+    /// point within `delta` radians of the unit vector `towards` (`delta`
+    /// of `pi` or more: any direction).
+    #[inline]
+    pub(crate) fn factor_within(&self, towards: DVec3, delta: f64) -> Factor {
         if self.is_isotropic() {
             return Factor::ONE;
         }
         let w = self.axis.as_dvec3();
-        let (psi, reach) = if w == DVec3::ZERO {
+        let (psi, reach) = if w == DVec3::ZERO || !(delta < PI) {
             (FRAC_PI_2, PI)
         } else {
             let w = w / w.length();
-            let delta = cone.sin_half_angle.clamp(0.0, 1.0).asin();
             (
-                angle(w, -cone.axis),
+                angle(w, towards),
                 f64::from(self.spread) + delta + ANGLE_SLACK,
             )
         };
@@ -261,6 +269,53 @@ impl LightTree {
             None => Factor::ONE,
             Some(o) => o.cones[index].factor(cone),
         }
+    }
+
+    /// The emission profiles' bounds of node `index` over every point
+    /// within `radius` of `centre` (a group of points): every direction
+    /// from a member (within the node's radius of its centroid) to such a
+    /// point lies within `asin((R + r) / D)` of the direction from the
+    /// centroid to `centre`, `D` their distance; any direction where the
+    /// balls meet. [`Factor::ONE`] for a tree of isotropic lights.
+    #[inline]
+    pub(crate) fn group_factor(&self, index: usize, centre: DVec3, radius: f64) -> Factor {
+        let Some(o) = &self.orientation else {
+            return Factor::ONE;
+        };
+        let node = &self.nodes[index];
+        let offset = centre - node.centroid.as_dvec3();
+        let distance = offset.length();
+        // Rounded up relatively, so that the angle is not understated.
+        let reach = (f64::from(node.radius) + radius) * (1.0 + 1e-12);
+        let delta = if reach < distance && distance > 0.0 {
+            (reach / distance).min(1.0).asin()
+        } else {
+            PI
+        };
+        o.cones[index].factor_within(offset / distance.max(f64::MIN_POSITIVE), delta)
+    }
+
+    /// The emission bounds of the light at `leaf_index` (leaf order) over
+    /// every point within `radius` of `centre`, as
+    /// [`group_factor`](Self::group_factor) bounds a node's.
+    #[inline]
+    pub(crate) fn light_group_factor(&self, leaf_index: usize, centre: DVec3, radius: f64) -> Factor {
+        let Some(o) = &self.orientation else {
+            return Factor::ONE;
+        };
+        let profile = o.profiles[leaf_index];
+        if profile.kind == Kind::Isotropic {
+            return Factor::ONE;
+        }
+        let offset = centre - self.lights[leaf_index].position.as_dvec3();
+        let distance = offset.length();
+        let reach = radius * (1.0 + 1e-12);
+        let delta = if reach < distance && distance > 0.0 {
+            (reach / distance).min(1.0).asin()
+        } else {
+            PI
+        };
+        NodeCone::of(&[profile]).factor_within(offset / distance.max(f64::MIN_POSITIVE), delta)
     }
 
     /// Whether some light of the tree has a profile other than isotropic.

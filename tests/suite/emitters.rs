@@ -225,14 +225,28 @@ proptest! {
     #[test]
     fn emitters_certify_in_a_batch(
         emitters in emitters(300),
-        points in prop::collection::vec((vec_in(12.0), direction()), 1..=96),
+        points in prop_oneof![
+            prop::collection::vec((vec_in(12.0), direction()), 1..=96),
+            // A patch of a plane under the lights, where groups share cuts.
+            (vec_in(12.0), direction(), prop::collection::vec((vec_in(1.0), vec_in(0.2)), 1..=200))
+                .prop_map(|(c, n, offsets)| {
+                    let n = n.normalize();
+                    offsets
+                        .into_iter()
+                        .map(|(o, tilt)| (c + (o - n * o.dot(n)), n + tilt))
+                        .collect()
+                }),
+        ],
         t in threshold(),
     ) {
         let tree = LightTree::build_emitters(&emitters).unwrap();
         let mut shading = tree.shading(Lambert::new(Vec3::new(0.6, 0.6, 0.9)));
         let qs: Vec<Query> = points.iter().map(|&(p, n)| Query::new(p, n).unwrap()).collect();
         let mut results = vec![placeholder(); qs.len()];
-        shading.shade_batch(&qs, t, Unoccluded, &mut results).unwrap();
+        let stats = shading.shade_batch(&qs, t, Unoccluded, &mut results).unwrap();
+        if std::env::var("BATCH_DEBUG").is_ok() {
+            eprintln!("STATS {} {}", stats.shared_points, stats.points_alone);
+        }
         for (q, r) in qs.iter().zip(&results) {
             check_bound(r, shading.exact_query(q, Unoccluded))?;
         }
@@ -517,6 +531,50 @@ fn grouping_by_axis_splits_a_rooms_walls() {
             for n in [Vec3::X, Vec3::NEG_Z, Vec3::new(1.0, -1.0, 0.5)] {
                 shade_once(tree, p, n);
             }
+        }
+    }
+}
+
+#[test]
+fn a_street_of_spots_shares_cuts_and_each_point_keeps_its_bound() {
+    // Lamps on both sides of a street, aimed down and tilted towards the
+    // road by up to 12 degrees; a patch of road and kerb under them.
+    let lamps: Vec<Emitter> = (0..20_000)
+        .map(|i| {
+            let (x, side) = ((i / 2) as f32 * 3.0, if i % 2 == 0 { -6.0f32 } else { 6.0 });
+            let tilt = (i % 13) as f32 / 12.0 * 12f32.to_radians();
+            let axis = Vec3::new(0.0, -side.signum() * tilt.sin(), -tilt.cos());
+            let spot = if i % 5 == 0 {
+                Emission::cosine(axis, 4.0)
+            } else {
+                Emission::spot(axis, 0.4, 0.9)
+            };
+            PointLight::new(Vec3::new(x, side, 5.0), Vec3::new(1.0, 0.6, 0.3) * 50.0)
+                .with_emission(spot)
+        })
+        .collect();
+    let tree = LightTree::build_emitters(&lamps).unwrap();
+    let queries: Vec<Query> = (0..256)
+        .map(|k| {
+            let (u, v) = ((k % 16) as f32, (k / 16) as f32);
+            let n = if k % 7 == 0 { Vec3::new(0.2, 0.1, 1.0) } else { Vec3::Z };
+            Query::new(Vec3::new(3000.0 + u * 0.5, -4.0 + v * 0.5, 0.0), n).unwrap()
+        })
+        .collect();
+    let mut shading = tree.shading(Lambert::new(Vec3::splat(0.5)));
+    for t in [
+        Threshold::relative(0.01),
+        Threshold::relative(0.05).with_interpolation(2.0),
+    ] {
+        let mut results = vec![placeholder(); queries.len()];
+        let stats = shading
+            .shade_batch(&queries, t, Unoccluded, &mut results)
+            .unwrap();
+        assert!(stats.shared_points > 128, "{stats:?}");
+        for (q, r) in queries.iter().zip(&results) {
+            let exact = shading.exact_query(q, Unoccluded);
+            assert!(r.certifies(exact), "{r:?} against {exact}");
+            assert!(exact.x > 0.0);
         }
     }
 }

@@ -192,9 +192,7 @@ impl<S: Shader> Shading<'_, S> {
         let Some(kd) = self.shader.diffuse_albedo(Seal) else {
             return Err(TooCostly);
         };
-        if self.tree.is_oriented() {
-            return Err(TooCostly);
-        }
+
         crate::dispatch::with_avx2(
             #[inline(always)]
             || self.shared_cut(queries, members, threshold, visibility, stats, kd),
@@ -390,13 +388,16 @@ impl Packing {
     ) -> Packed {
         let scratch = cut.scratch;
         packed.start(cut.error, region.steering(), region.spread, self.limits);
+        // Each node's diffuse estimate times its emission factor's
+        // estimate over the group (1 for isotropic lights).
+        let factor = |node: u32| region.node_factor(tree, node as usize).estimate;
         if cut.blended {
             for &(node, weight) in &scratch.weighted {
-                packed.push_node(&tree.nodes[node as usize], self.kd * weight);
+                packed.push_node(&tree.nodes[node as usize], self.kd * (weight * factor(node)));
             }
         } else {
             for (e, _) in cut.list.waiting() {
-                packed.push_node(&tree.nodes[e.node as usize], self.kd);
+                packed.push_node(&tree.nodes[e.node as usize], self.kd * factor(e.node));
             }
         }
         for &(position, intensity) in &scratch.above {
@@ -444,11 +445,16 @@ fn point_sum<S: Shader, M, V: Visibility>(
     let mut rays = 0;
     if !scratch.across.is_empty() || !scratch.shadowed.is_empty() {
         let per_point = shader.prepare(surface);
-        for &(position, intensity) in &scratch.across {
-            sum.add(shader.eval(&per_point, surface, position, intensity));
+        let p = surface.point;
+        for &(position, intensity, profile) in &scratch.across {
+            let f = profile.factor(position.as_vec3(), p);
+            if f > 0.0 {
+                sum.add(shader.eval(&per_point, surface, position, intensity) * f);
+            }
         }
-        for &(position, intensity) in &scratch.shadowed {
-            let value = shader.eval(&per_point, surface, position, intensity);
+        for &(position, intensity, profile) in &scratch.shadowed {
+            let f = profile.factor(position.as_vec3(), p);
+            let value = shader.eval(&per_point, surface, position, intensity) * f;
             if value != DVec3::ZERO {
                 rays += 1;
                 if visibility.visible(query.point(), position.as_vec3()) {

@@ -282,8 +282,6 @@ impl<S: Shader> Shading<'_, S> {
     fn shares<V: Visibility>(&self, threshold: &Threshold) -> bool {
         (V::ALWAYS_VISIBLE || V::CLASSIFIES_GROUPS)
             && self.shader.diffuse_albedo(Seal).is_some()
-            // A group's shared error knows nothing of emission profiles.
-            && !self.tree.is_oriented()
             && threshold.budget().is_none()
             && threshold.max_contribution().is_none()
     }
