@@ -11,6 +11,7 @@
 //! cargo run --release -p manylights-report -- anatomy         # where a cut's work goes
 //! cargo run --release -p manylights-report -- ggx             # GGX against Phong and the exact sum
 //! cargo run --release -p manylights-report -- sampling        # light sampling for path tracers
+//! cargo run --release -p manylights-report -- emitters        # spot lights and virtual point lights
 //! ```
 //!
 //! The full report takes about a minute on 2 cores, plus about two minutes
@@ -35,7 +36,9 @@
 //! lobe and the vectorized exact GGX sum, [`manylights_report::ggx`]) and
 //! `sampling` (one light per shading point by the crate's `LightSampler`
 //! against power sampling, pbrt-v4's and Cycles' importances on the same
-//! tree, and the stochastic cut; a few minutes).
+//! tree, and the stochastic cut; a few minutes) and `emitters` (spot
+//! lights on the street city and instant radiosity's virtual point lights
+//! in a room, per point and per pixel, [`manylights_report::emitters`]).
 //! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
 //! repository root:
 //!
@@ -68,6 +71,7 @@ use manylights_report::config::{
     SHADOWS, TREE_ABSOLUTE, TREE_RELATIVE, WARD,
 };
 use manylights_report::csv::{write_csv, write_scaling_csv};
+use manylights_report::emitters::{EMITTERS, run_emitters};
 use manylights_report::evaluations::print_evaluations_table;
 use manylights_report::ggx::print_ggx;
 use manylights_report::light_sampling::{SAMPLING, run_sampling};
@@ -118,6 +122,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                     CITY_MESH,
                     GGX,
                     SAMPLING,
+                    EMITTERS,
                 ]
                 .contains(&name) =>
             {
@@ -127,7 +132,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
                      [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {CITY_MESH} | {SHADOWS} | \
-                     {SCALING} | {ANATOMY} | {GGX} | {SAMPLING}]...",
+                     {SCALING} | {ANATOMY} | {GGX} | {SAMPLING} | {EMITTERS}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -167,10 +172,13 @@ fn main() -> Result<(), Box<dyn Error>> {
     if named(SAMPLING) {
         run_sampling(quick)?;
     }
+    if named(EMITTERS) {
+        run_emitters(quick)?;
+    }
     if !parts.is_empty()
         && parts
             .iter()
-            .all(|p| p == ANATOMY || p == GGX || p == SAMPLING)
+            .all(|p| p == ANATOMY || p == GGX || p == SAMPLING || p == EMITTERS)
     {
         return Ok(());
     }

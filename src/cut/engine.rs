@@ -25,7 +25,8 @@ pub(crate) trait Region<S: Shader>: Sized {
 
     /// Whether a visible node is summed light by light when it enters the
     /// cut instead of bounded.
-    fn sums_exactly<V: Visibility>(cut: &Cut<'_, S, V, Self>, node: &Node) -> bool;
+    /// `node` is node `index` of the tree.
+    fn sums_exactly<V: Visibility>(cut: &Cut<'_, S, V, Self>, index: usize, node: &Node) -> bool;
 
     /// A single light (or coincident lights) entering the cut, times
     /// `weight`; `leaf` is its node, for the host.
@@ -591,7 +592,7 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
         let mut wanted = 0u8;
         for (i, child) in node.children().enumerate() {
             let c = &tree.nodes[child];
-            if known && R::sums_exactly(self, c) {
+            if known && R::sums_exactly(self, child, c) {
                 // Summing a few visible lights, or those of a near node,
                 // costs less than bounding them (the budget counted them);
                 // a node that is exactly 0 needs neither.

@@ -269,7 +269,7 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
     }
 
     #[inline(always)]
-    fn sums_exactly<V: Visibility>(_: &Cut<'_, S, V, Self>, _: &Node) -> bool {
+    fn sums_exactly<V: Visibility>(_: &Cut<'_, S, V, Self>, _: usize, _: &Node) -> bool {
         false
     }
 

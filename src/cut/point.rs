@@ -58,6 +58,29 @@ pub(crate) struct Point<'a, S: Shader> {
     /// Children of the node being refined, waiting to be bounded together
     /// (kept here so that it is set up once per call, not per refinement).
     children: Children,
+    /// The emission factors last computed for nodes (index and factor),
+    /// slot `index % 8`: a node's children are contiguous, so those of one
+    /// refinement each have their own slot; bounding a child right after
+    /// deciding not to sum it reuses its factor.
+    factors: [core::cell::Cell<(u32, Factor)>; CHILDREN],
+}
+
+impl<S: Shader> Point<'_, S> {
+    /// Notes node `index`'s emission factor at this point.
+    #[inline(always)]
+    fn remember(&self, index: usize, factor: Factor) {
+        self.factors[index % CHILDREN].set((index as u32, factor));
+    }
+
+    /// Node `index`'s emission factor under `cone`, from the note if it is
+    /// of that node.
+    #[inline(always)]
+    fn factor_of(&self, tree: &LightTree, index: usize, cone: &Cone) -> Factor {
+        match self.factors[index % CHILDREN].get() {
+            (i, f) if i as usize == index => f,
+            _ => tree.factor(index, cone),
+        }
+    }
 }
 
 impl<'a, S: Shader> Point<'a, S> {
@@ -90,6 +113,7 @@ impl<'a, S: Shader> Point<'a, S> {
             horizon: shader.horizon(surface),
             dark_plane: (NO_PLANE, false),
             children: Children::default(),
+            factors: core::array::from_fn(|_| core::cell::Cell::new((u32::MAX, Factor::ONE))),
         }
     }
 }
@@ -126,20 +150,42 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
 
     /// A small node (see [`EXACT_NODE_LIGHTS`]), or one near the shading
     /// point for its size and number of lights (see [`NEAR_NODE_LIGHTS`]).
+    ///
+    /// Emitters whose profiles may be 0 at the point are tested first: a
+    /// node certified dark is left to the bound (which drops it at the
+    /// cost of one evaluation rather than a test of each light), and a
+    /// near node is summed whole only where every member's profile is 1
+    /// at the point, as an isotropic node's would be.
     #[inline(always)]
-    fn sums_exactly<V: Visibility>(cut: &Cut<'_, S, V, Self>, node: &Node) -> bool {
+    fn sums_exactly<V: Visibility>(cut: &Cut<'_, S, V, Self>, index: usize, node: &Node) -> bool {
         if node.radius == 0.0 {
             return false;
         }
         let region = &cut.region;
-        if node.light_count <= region.exact_lights {
-            return true;
+        let small = node.light_count <= region.exact_lights;
+        let near = || {
+            node.light_count <= region.near_lights
+                && is_near(
+                    node,
+                    (node.centroid.as_dvec3() - region.surface.point).length_squared(),
+                )
+        };
+        if !cut.tree.is_oriented() {
+            return small || near();
         }
-        node.light_count <= region.near_lights
-            && is_near(
-                node,
-                (node.centroid.as_dvec3() - region.surface.point).length_squared(),
-            )
+        if !small && node.light_count > region.near_lights {
+            return false;
+        }
+        let factor = node.cone(region.surface.point).map(|cone| {
+            let f = cut.tree.factor(index, &cone);
+            region.remember(index, f);
+            f
+        });
+        match factor {
+            Some(f) if f.upper == 0.0 => false,
+            Some(f) if f.lower < 1.0 => small,
+            _ => small || near(),
+        }
     }
 
     #[inline(always)]
@@ -179,7 +225,7 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
         let node = &cut.tree.nodes[index];
         match node.cone(cut.region.surface.point) {
             Some(cone) => {
-                let factor = cut.tree.factor(index, &cone);
+                let factor = cut.region.factor_of(cut.tree, index, &cone);
                 if factor.upper == 0.0 {
                     // Every member aimed away from the point.
                     return None;
@@ -241,7 +287,7 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
             let child = first + i;
             match tree.nodes[child].cone(cut.region.surface.point) {
                 Some(cone) if oriented => {
-                    let factor = tree.factor(child, &cone);
+                    let factor = cut.region.factor_of(tree, child, &cone);
                     // A child whose members all aim away is exactly 0.
                     if factor.upper > 0.0 {
                         cut.region.children.push(child as u32, cone, factor);
@@ -292,10 +338,10 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
         let cost = if node.is_leaf() {
             node.light_count
         } else if Cut::<S, V, Self>::known(visible) {
-            cut.tree.nodes[node.children()]
-                .iter()
-                .map(|c| {
-                    if Self::sums_exactly(cut, c) {
+            node.children()
+                .map(|i| {
+                    let c = &cut.tree.nodes[i];
+                    if Self::sums_exactly(cut, i, c) {
                         c.light_count
                     } else {
                         1

@@ -10,7 +10,6 @@ use glam::{DVec3, Vec3};
 use super::layout::LightTree;
 use crate::emission::{Kind, Profile, lobe, spot};
 use crate::geometry::Cone;
-use crate::numeric::round_up_f32;
 
 /// Added to every angle the bound derives (radians): it covers the
 /// rounding of the stored axes and of the angles' own computation, and the
@@ -48,12 +47,16 @@ const HAS_TWO_SIDED: u8 = 16;
 /// its profile's parameters within the stored ranges.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct NodeCone {
-    /// Unit, or zero where the members' axes have no useful mean (the
-    /// spread is then `pi`).
-    axis: Vec3,
-    /// Largest angle (radians) between `axis` and a member's axis, rounded
-    /// up and padded.
-    spread: f32,
+    /// Unit (in `f64`), or zero where the members' axes have no useful
+    /// mean (the spread is then `pi`).
+    axis: DVec3,
+    /// Cosine and sine of the spread: the largest angle between `axis` and
+    /// a member's axis, plus [`ANGLE_SLACK`]; at most a right angle (else
+    /// `(-1, 0)` and a zero axis).
+    spread: (f64, f64),
+    /// Whether every oriented member has exactly the same axis (the
+    /// spread is then [`ANGLE_SLACK`] alone).
+    pub(crate) one_axis: bool,
     /// Least and greatest cosine exponent of the node's cosine members.
     k: [f32; 2],
     /// Least and greatest `cos(outer_angle)` of its spot members.
@@ -87,6 +90,10 @@ fn angle(a: DVec3, b: DVec3) -> f64 {
     a.cross(b).length().atan2(a.dot(b))
 }
 
+/// A few ulps of a cosine or sine near 1: what the angle-sum formulas and
+/// the square roots below may err by, moved outward.
+const TRIG_SLACK: f64 = 8.0 * f64::EPSILON;
+
 impl NodeCone {
     /// The cone of the lights with `profiles`.
     pub(crate) fn of(profiles: &[Profile]) -> Self {
@@ -101,6 +108,8 @@ impl NodeCone {
             r[1] = r[1].max(v);
         };
         let mut sum = DVec3::ZERO;
+        let mut first: Option<Vec3> = None;
+        let mut one_axis = true;
         for p in profiles {
             match p.kind {
                 Kind::Isotropic => {
@@ -122,6 +131,7 @@ impl NodeCone {
             } else {
                 HAS_ONE_SIDED
             };
+            one_axis &= *first.get_or_insert(p.axis) == p.axis;
             let m = p.axis.as_dvec3();
             // A two-sided member's axis may be taken either way: the one
             // nearer the others'.
@@ -132,29 +142,38 @@ impl NodeCone {
             };
         }
         let length = sum.length();
-        let axis = if length > 0.0 {
-            (sum / length).as_vec3()
+        let w = if one_axis && let Some(a) = first {
+            a.as_dvec3().normalize_or_zero()
+        } else if length > 0.0 {
+            sum / length
         } else {
-            Vec3::ZERO
+            DVec3::ZERO
         };
-        let w = axis.as_dvec3();
-        let w_length = w.length();
-        let spread = if w_length > 0.5 {
-            let w = w / w_length;
+        let spread = if w != DVec3::ZERO {
             let mut widest = 0.0f64;
-            for p in profiles.iter().filter(|p| p.kind != Kind::Isotropic) {
-                let m = p.axis.as_dvec3();
-                let m = m / m.length();
-                let a = angle(w, m);
-                widest = widest.max(if p.two_sided { a.min(PI - a) } else { a });
+            if !one_axis {
+                for p in profiles.iter().filter(|p| p.kind != Kind::Isotropic) {
+                    let m = p.axis.as_dvec3();
+                    let m = m / m.length();
+                    let a = angle(w, m);
+                    widest = widest.max(if p.two_sided { a.min(PI - a) } else { a });
+                }
             }
-            widest
+            widest + ANGLE_SLACK
         } else {
             PI
         };
+        // Spreads past a right angle bound nothing worth the trouble: the
+        // node is then taken as aimed every way.
+        let spread = if spread <= FRAC_PI_2 {
+            (spread.cos(), spread.sin())
+        } else {
+            (-1.0, 0.0)
+        };
         Self {
-            axis: if spread < PI { axis } else { Vec3::ZERO },
-            spread: round_up_f32((spread + ANGLE_SLACK).min(PI)),
+            axis: if spread.0 > -1.0 { w } else { DVec3::ZERO },
+            spread,
+            one_axis: one_axis && first.is_some(),
             k,
             outer,
             inner,
@@ -168,6 +187,25 @@ impl NodeCone {
         self.kinds & !HAS_ISOTROPIC == 0
     }
 
+    /// Whether every member is a one-sided cosine lobe of exponent 1 (a
+    /// diffuse virtual point light) about one same axis, which it returns
+    /// (unit, pointing from the lights into the lit half-space).
+    #[inline]
+    pub(crate) fn diffuse_lobe(&self) -> Option<DVec3> {
+        (self.kinds == HAS_COSINE | HAS_ONE_SIDED && self.one_axis && self.k == [1.0, 1.0])
+            .then_some(self.axis)
+    }
+
+    /// Whether every member is one-sided and dark at every cosine up to
+    /// `c` (the greatest its members see): each profile is 0 at `c` and
+    /// so below it.
+    #[inline(always)]
+    fn dark_at(&self, c: f64) -> bool {
+        self.kinds & (HAS_ISOTROPIC | HAS_TWO_SIDED) == 0
+            && (self.kinds & HAS_COSINE == 0 || c <= 0.0)
+            && (self.kinds & HAS_SPOT == 0 || c <= f64::from(self.outer[0]))
+    }
+
     /// Bounds every member's profile value at the point from which the
     /// node's ball is seen under `cone`: each member's direction to the
     /// point lies within the cone's half-angle `delta` of the direction
@@ -177,51 +215,74 @@ impl NodeCone {
     /// exponent and cosines.
     #[inline]
     pub(crate) fn factor(&self, cone: &Cone) -> Factor {
-        let delta = cone.sin_half_angle.clamp(0.0, 1.0).asin();
-        self.factor_within(-cone.axis, delta)
+        self.factor_within(-cone.axis, cone.sin_half_angle, cone.cos_half_angle)
     }
 
     /// [`factor`](Self::factor) for every direction from a member to a
-    /// point within `delta` radians of the unit vector `towards` (`delta`
-    /// of `pi` or more: any direction).
+    /// point within the angle `delta` (given by its sine and cosine, `delta
+    /// <= pi / 2`) of the unit vector `towards`.
+    ///
+    /// In cosines throughout: with `sigma = spread + delta`, the angles lie
+    /// in `[max(0, psi - sigma), min(pi, psi + sigma)]`, whose cosines the
+    /// angle-sum formulas give from `cos psi = w . towards` and `sin psi =
+    /// |w x towards|`; each is moved outward by four [`TRIG_SLACK`]s (the
+    /// formulas' rounding, and the stored cosine and sine of the spread,
+    /// are a few ulps), and the spread itself carries [`ANGLE_SLACK`], far
+    /// more than the rounding of a light's cosine in the model.
     #[inline]
-    pub(crate) fn factor_within(&self, towards: DVec3, delta: f64) -> Factor {
+    pub(crate) fn factor_within(&self, towards: DVec3, sin_delta: f64, cos_delta: f64) -> Factor {
         if self.is_isotropic() {
             return Factor::ONE;
         }
-        let w = self.axis.as_dvec3();
-        let (psi, reach) = if w == DVec3::ZERO || !(delta < PI) {
-            (FRAC_PI_2, PI)
+        let w = self.axis;
+        let (cos_s, sin_s) = self.spread;
+        // sigma = spread + delta (both at most a right angle), as a cosine
+        // and a sine.
+        let cos_sigma = cos_s * cos_delta - sin_s * sin_delta;
+        let sin_sigma = sin_s * cos_delta + cos_s * sin_delta;
+        let (c_least, c_most, c_psi) = if w == DVec3::ZERO {
+            (1.0, -1.0, 0.0)
         } else {
-            let w = w / w.length();
-            (
-                angle(w, towards),
-                f64::from(self.spread) + delta + ANGLE_SLACK,
-            )
+            let (cos_psi, sin_psi) = (w.dot(towards), w.cross(towards).length());
+            let least = if cos_psi >= cos_sigma {
+                // psi <= sigma: the axis itself is among the directions.
+                1.0
+            } else {
+                (cos_psi * cos_sigma + sin_psi * sin_sigma + 4.0 * TRIG_SLACK).min(1.0)
+            };
+            if self.dark_at(least) {
+                // Most nodes the cut bounds far from a spot's cone end here.
+                return Factor {
+                    lower: 0.0,
+                    estimate: 0.0,
+                    upper: 0.0,
+                };
+            }
+            // sin(psi + sigma) <= 0: psi + sigma reaches pi.
+            let most = if sin_psi * cos_sigma + cos_psi * sin_sigma <= TRIG_SLACK {
+                -1.0
+            } else {
+                (cos_psi * cos_sigma - sin_psi * sin_sigma - 4.0 * TRIG_SLACK).max(-1.0)
+            };
+            (least, most, cos_psi)
         };
-        let (least, most) = ((psi - reach).max(0.0), (psi + reach).min(PI));
-        // The least and greatest angle any member's profile sees.
+        // The greatest and least cosine any member's profile sees.
         let two = self.kinds & HAS_TWO_SIDED != 0;
         let one = self.kinds & HAS_ONE_SIDED != 0;
-        let nearest = if two {
-            least.min(PI - most)
+        let c_hi = if two { c_least.max(-c_most) } else { c_least };
+        let farthest_two = if c_least >= 0.0 && c_most <= 0.0 {
+            0.0
+        } else if c_most > 0.0 {
+            c_most
         } else {
-            least
+            -c_least
         };
-        let farthest_two = if least <= FRAC_PI_2 && FRAC_PI_2 <= most {
-            FRAC_PI_2
-        } else if most < FRAC_PI_2 {
-            most
-        } else {
-            PI - least
-        };
-        let farthest = match (one, two) {
-            (true, true) => most.max(farthest_two),
+        let c_lo = match (one, two) {
+            (true, true) => c_most.min(farthest_two),
             (false, true) => farthest_two,
-            _ => most,
+            _ => c_most,
         };
-        let centre = if two && !one { psi.min(PI - psi) } else { psi };
-        let (c_hi, c_lo, c_mid) = (nearest.cos(), farthest.cos(), centre.cos());
+        let c_mid = if two && !one { c_psi.abs() } else { c_psi };
         let mut upper = 0.0f64;
         let mut lower = 1.0f64;
         let mut estimate: Option<f64> = None;
@@ -260,6 +321,23 @@ impl NodeCone {
     }
 }
 
+/// The unit direction of `offset` and the sine and cosine of the angle
+/// under which a ball of radius `reach` about its end is seen from its
+/// start (rounded outward); a right angle where the ball reaches the start
+/// (every direction then possible within `pi / 2` of `offset`'s, which the
+/// caller's spread widens; a zero offset gives no direction at all).
+#[inline]
+fn seen_within(offset: DVec3, reach: f64) -> (DVec3, f64, f64) {
+    let distance = offset.length();
+    let reach = reach * (1.0 + 4.0 * f64::EPSILON);
+    if !(distance > reach) {
+        return (DVec3::ZERO, 1.0, 0.0);
+    }
+    let sin = (reach / distance * (1.0 + 4.0 * f64::EPSILON)).min(1.0);
+    let cos = ((1.0 - sin * sin).max(0.0).sqrt() - TRIG_SLACK).max(0.0);
+    (offset / distance, sin, cos)
+}
+
 impl LightTree {
     /// The emission profiles' bounds of node `index` seen under `cone`:
     /// [`Factor::ONE`] for a tree of isotropic lights.
@@ -284,15 +362,8 @@ impl LightTree {
         };
         let node = &self.nodes[index];
         let offset = centre - node.centroid.as_dvec3();
-        let distance = offset.length();
-        // Rounded up relatively, so that the angle is not understated.
-        let reach = (f64::from(node.radius) + radius) * (1.0 + 1e-12);
-        let delta = if reach < distance && distance > 0.0 {
-            (reach / distance).min(1.0).asin()
-        } else {
-            PI
-        };
-        o.cones[index].factor_within(offset / distance.max(f64::MIN_POSITIVE), delta)
+        let (towards, sin, cos) = seen_within(offset, f64::from(node.radius) + radius);
+        o.cones[index].factor_within(towards, sin, cos)
     }
 
     /// The emission bounds of the light at `leaf_index` (leaf order) over
@@ -308,14 +379,8 @@ impl LightTree {
             return Factor::ONE;
         }
         let offset = centre - self.lights[leaf_index].position.as_dvec3();
-        let distance = offset.length();
-        let reach = radius * (1.0 + 1e-12);
-        let delta = if reach < distance && distance > 0.0 {
-            (reach / distance).min(1.0).asin()
-        } else {
-            PI
-        };
-        NodeCone::of(&[profile]).factor_within(offset / distance.max(f64::MIN_POSITIVE), delta)
+        let (towards, sin, cos) = seen_within(offset, radius);
+        NodeCone::of(&[profile]).factor_within(towards, sin, cos)
     }
 
     /// Whether some light of the tree has a profile other than isotropic.

@@ -18,6 +18,9 @@
 //!   diffuse ground, a glossy floor, and a glossy floor with spheres.
 //! * [`ground_lights`], [`ground_points`]: lights 4 to 6 units above a
 //!   1000 x 1000 ground, points on it (the evaluations-per-point table).
+//! * [`spot_city_lights`]: the street city's lamps as spots aimed down;
+//!   [`Room`]: instant radiosity in a furnished room (virtual point lights
+//!   traced from a few primary lights).
 //! * [`sphere_lights`]: lights over a sphere, for points whose tangent
 //!   plane cuts it (the `seams` example's horizon scanlines).
 
@@ -25,6 +28,7 @@ mod canopy;
 mod chandelier;
 mod ground;
 mod night_city;
+mod room;
 mod sphere;
 mod streets;
 mod strings;
@@ -34,7 +38,8 @@ pub use chandelier::chandelier;
 pub use ground::{GROUND_SIZE, ground_lights, ground_points};
 pub use night_city::{Building, City, GROUND_ALBEDO, SHADOW_BLOCKS, city_shadows};
 pub use sphere::{SPHERE_RADIUS, sphere_lights};
-pub use streets::{GRID_BLOCK, city, city_lights, lamp_grid};
+pub use room::{POINT_OFFSET, ROOM_SIZE, Room, VPL_OFFSET, isotropic};
+pub use streets::{GRID_BLOCK, city, city_lights, lamp_grid, spot_city_lights};
 pub use strings::{
     GLOSSY_EXPONENT, GLOSSY_SCENE_EXPONENT, Glossy, GlossyHit, Sphere, specular, strings,
 };

@@ -136,3 +136,35 @@ pub fn lamp_grid(blocks: usize, seed: u64) -> Vec<PointLight> {
     }
     lights
 }
+
+/// Greatest tilt of a spot-lit lamp's axis from straight down.
+const SPOT_TILT_DEGREES: f32 = 12.0;
+/// Range of the lamps' outer cone angles, radians.
+const SPOT_OUTER: (f32, f32) = (0.6, 1.2);
+/// Range of the inner angle as a fraction of the outer.
+const SPOT_INNER: (f32, f32) = (0.4, 0.85);
+/// Seed offset of the spots' axes and angles.
+const SPOT_SEED: u64 = 0x5B07;
+
+/// The lamps of [`city_lights`] as glTF spot lights aimed at the ground:
+/// each axis tilted from straight down by up to [`SPOT_TILT_DEGREES`] in a
+/// random direction, outer angles 0.6 to 1.2 radians, inner angles 40% to
+/// 85% of the outer.
+pub fn spot_city_lights(count: usize, seed: u64) -> Vec<manylights::Emitter> {
+    let mut rng = rng(seed ^ SPOT_SEED);
+    city_lights(count, seed)
+        .into_iter()
+        .map(|light| {
+            let tilt = rng.random_range(0.0..SPOT_TILT_DEGREES).to_radians();
+            let around = rng.random_range(0.0..std::f32::consts::TAU);
+            let axis = Vec3::new(
+                tilt.sin() * around.cos(),
+                tilt.sin() * around.sin(),
+                -tilt.cos(),
+            );
+            let outer = rng.random_range(SPOT_OUTER.0..SPOT_OUTER.1);
+            let inner = outer * rng.random_range(SPOT_INNER.0..SPOT_INNER.1);
+            light.with_emission(manylights::Emission::spot(axis, inner, outer))
+        })
+        .collect()
+}
