@@ -48,7 +48,7 @@ pub(crate) fn settle_point<S: Shader, V: Visibility>(
     visibility: V,
     list: &mut ErrorList,
 ) -> Settled<V> {
-    let mut region = Point::new(shader, surface, point, threshold, None);
+    let mut region = Point::new(shader, surface, point, threshold, None, tree.is_oriented());
     region.coarse = None;
     let mut cut = Cut::new(tree, shader, region, threshold, visibility);
     cut.enter_root(list, None);

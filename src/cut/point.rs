@@ -17,6 +17,7 @@ use crate::LightLanes;
 use crate::geometry::{Cone, Surface};
 use crate::numeric::{CompensatedSum, SUM_SLACK};
 use crate::shader::{ChildrenOf, NodeEstimate, Seal, Shader};
+use crate::lambert::diffuse_lobe_bound;
 use crate::tree::orientation::Factor;
 use crate::tree::{LightTree, NO_PLANE, Node};
 use crate::visibility::Visibility;
@@ -63,9 +64,49 @@ pub(crate) struct Point<'a, S: Shader> {
     /// refinement each have their own slot; bounding a child right after
     /// deciding not to sum it reuses its factor.
     factors: [core::cell::Cell<(u32, Factor)>; CHILDREN],
+    /// The shader's albedo where it is exactly diffuse and the tree holds
+    /// emitters (for [`diffuse_lobe_bound`]), else `None`.
+    diffuse: Option<DVec3>,
 }
 
 impl<S: Shader> Point<'_, S> {
+    /// Node `index`'s bound at this point (seen under `cone`) for emitters
+    /// whose profiles lie within `factor`, from the shader's isotropic
+    /// bound `bound`: [`emitted`], intersected, for a diffuse shader and a
+    /// node of diffuse virtual point lights about one axis, with the
+    /// second-order expansion of their smooth terms
+    /// ([`diffuse_lobe_bound`]).
+    #[inline(always)]
+    fn oriented(
+        &self,
+        tree: &LightTree,
+        index: usize,
+        cone: &Cone,
+        bound: NodeEstimate,
+        factor: Factor,
+    ) -> NodeEstimate {
+        let product = emitted(bound, factor);
+        let Some(kd) = self.diffuse else {
+            return product;
+        };
+        let Some(axis) = tree.diffuse_lobe(index) else {
+            return product;
+        };
+        let node = &tree.nodes[index];
+        match diffuse_lobe_bound(node, self.surface, cone, axis, kd) {
+            Some(t) => {
+                let lower = product.lower.max(t.lower);
+                let upper = product.upper.min(t.upper);
+                if lower.cmple(upper).all() {
+                    NodeEstimate::new(t.estimate, lower, upper)
+                } else {
+                    product
+                }
+            }
+            None => product,
+        }
+    }
+
     /// Notes node `index`'s emission factor at this point.
     #[inline(always)]
     fn remember(&self, index: usize, factor: Factor) {
@@ -85,7 +126,8 @@ impl<S: Shader> Point<'_, S> {
 
 impl<'a, S: Shader> Point<'a, S> {
     /// The region of the point `point` (as the host was given it) with
-    /// surface `surface`, for `threshold`.
+    /// surface `surface`, for `threshold`, in a tree of emitters if
+    /// `oriented`.
     #[inline(always)]
     pub(crate) fn new(
         shader: &S,
@@ -93,6 +135,7 @@ impl<'a, S: Shader> Point<'a, S> {
         point: Vec3,
         threshold: &Threshold,
         small_lanes: Option<&'a [LightLanes]>,
+        oriented: bool,
     ) -> Self {
         let interpolating = threshold.interpolation().is_some();
         Self {
@@ -114,6 +157,11 @@ impl<'a, S: Shader> Point<'a, S> {
             dark_plane: (NO_PLANE, false),
             children: Children::default(),
             factors: core::array::from_fn(|_| core::cell::Cell::new((u32::MAX, Factor::ONE))),
+            diffuse: if oriented {
+                shader.diffuse_albedo(Seal)
+            } else {
+                None
+            },
         }
     }
 }
@@ -234,7 +282,8 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
                 let bound = cut
                     .shader
                     .bound(&region.per_point, region.surface, node, &cone);
-                cut.bounded(index, visible, weight, &emitted(bound, factor))
+                let bound = region.oriented(cut.tree, index, &cone, bound, factor);
+                cut.bounded(index, visible, weight, &bound)
             }
             None => Some(cut.unbounded(index, visible)),
         }
@@ -505,7 +554,13 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
             let children = &self.region.children;
             let (index, mut bound) = (children.indices[i], children.bounds[i]);
             if oriented {
-                bound = emitted(bound, children.factors[i]);
+                bound = self.region.oriented(
+                    tree,
+                    index as usize,
+                    &children.cones[i],
+                    bound,
+                    children.factors[i],
+                );
             }
             if let Some(entry) = self.bounded(index as usize, visible, weight, &bound) {
                 pending.pending(entry);
@@ -628,7 +683,7 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
     {
         return result;
     }
-    let region = Point::new(shader, surface, point, threshold, small_lanes);
+    let region = Point::new(shader, surface, point, threshold, small_lanes, tree.is_oriented());
     let mut cut = Cut::new(tree, shader, region, threshold, visibility);
     let interpolating = threshold.interpolation().is_some();
     let (list, nesting) = (&mut scratch.list, &mut scratch.nesting);

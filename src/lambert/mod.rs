@@ -35,11 +35,14 @@ mod children;
 mod coarse;
 mod group;
 mod leaf;
+mod lobe;
 mod node;
 mod proofs;
 mod series;
 mod shared;
 mod taylor;
+
+pub(crate) use lobe::diffuse_lobe_bound;
 
 use crate::dispatch::avx2_or;
 use crate::geometry::{Cone, GroupView, Surface};

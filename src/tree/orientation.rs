@@ -383,6 +383,14 @@ impl LightTree {
         NodeCone::of(&[profile]).factor_within(towards, sin, cos)
     }
 
+    /// The common axis of node `index`'s members where every one is a
+    /// diffuse virtual point light about it (see
+    /// [`NodeCone::diffuse_lobe`]).
+    #[inline(always)]
+    pub(crate) fn diffuse_lobe(&self, index: usize) -> Option<DVec3> {
+        self.orientation.as_ref()?.cones[index].diffuse_lobe()
+    }
+
     /// Whether some light of the tree has a profile other than isotropic.
     #[inline(always)]
     pub(crate) fn is_oriented(&self) -> bool {

@@ -104,6 +104,42 @@ fn emitters(max: usize) -> impl Strategy<Value = Vec<Emitter>> {
     })
 }
 
+/// Virtual point lights as instant radiosity leaves them: diffuse lobes
+/// (`k = 1`) on one to four axis-aligned walls, each light exactly on its
+/// wall and aimed along the wall's normal, with a few primary spots and
+/// isotropic lamps among them.
+fn vpl_walls(max: usize) -> impl Strategy<Value = Vec<Emitter>> {
+    let wall = (0usize..6, -8.0f32..=8.0);
+    (
+        prop::collection::vec(wall, 1..=4),
+        prop::collection::vec(
+            (any::<prop::sample::Index>(), -10.0f32..=10.0, -10.0f32..=10.0, intensity()),
+            1..=max,
+        ),
+        prop::collection::vec((vec_in(10.0), intensity(), direction()), 0..=3),
+    )
+        .prop_map(|(walls, vpls, primaries)| {
+            let mut out: Vec<Emitter> = vpls
+                .into_iter()
+                .map(|(which, u, v, i)| {
+                    let (face, at) = walls[which.index(walls.len())];
+                    let axis = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z][face];
+                    let p = match face / 2 {
+                        0 => Vec3::new(at, u, v),
+                        1 => Vec3::new(u, at, v),
+                        _ => Vec3::new(u, v, at),
+                    };
+                    PointLight::new(p, i).with_emission(Emission::cosine(axis, 1.0))
+                })
+                .collect();
+            for (k, (p, i, d)) in primaries.into_iter().enumerate() {
+                let e = if k % 2 == 0 { Emission::spot(d, 0.3, 0.8) } else { Emission::Isotropic };
+                out.push(PointLight::new(p, i * 10.0).with_emission(e));
+            }
+            out
+        })
+}
+
 /// A host with a wall at `x = 0`: a light is visible from the side it
 /// lies on; nodes are classified by their boxes.
 #[derive(Clone, Copy)]
@@ -202,6 +238,35 @@ proptest! {
         let mut ggx = tree.shading(Ggx::new(Vec3::splat(0.04), 0.2));
         let r = ggx.shade_query(&qv, t, Unoccluded).unwrap();
         check_bound(&r, ggx.exact_query(&qv, Unoccluded))?;
+    }
+
+    /// Virtual point lights on walls (where the second-order bound of
+    /// diffuse lobes about one axis applies), Lambert, one point and a
+    /// batch of points on a patch.
+    #[test]
+    fn vpls_on_walls_certify(
+        emitters in vpl_walls(600),
+        point in vec_in(12.0),
+        normal in direction(),
+        patch in prop::collection::vec((vec_in(1.0), vec_in(0.2)), 1..=64),
+        t in threshold(),
+    ) {
+        let tree = LightTree::builder().max_leaf_lights(4).build_emitters(&emitters).unwrap();
+        let mut shading = tree.shading(Lambert::new(Vec3::new(0.9, 0.6, 0.3)));
+        let q = Query::new(point, normal).unwrap();
+        let r = shading.shade_query(&q, t, Unoccluded).unwrap();
+        check_bound(&r, shading.exact_query(&q, Unoccluded))?;
+        check_threshold(&r, &t)?;
+        let n = normal.normalize();
+        let qs: Vec<Query> = patch
+            .iter()
+            .map(|&(o, tilt)| Query::new(point + (o - n * o.dot(n)), n + tilt).unwrap())
+            .collect();
+        let mut results = vec![placeholder(); qs.len()];
+        shading.shade_batch(&qs, t, Unoccluded, &mut results).unwrap();
+        for (q, r) in qs.iter().zip(&results) {
+            check_bound(r, shading.exact_query(q, Unoccluded))?;
+        }
     }
 
     /// With a host's visibility: the wall at `x = 0`.
