@@ -163,8 +163,7 @@ impl Emission {
                 outer_angle,
                 two_sided,
             } => {
-                if !(outer_angle > 0.0 && f64::from(outer_angle) <= core::f64::consts::FRAC_PI_2)
-                {
+                if !(outer_angle > 0.0 && f64::from(outer_angle) <= core::f64::consts::FRAC_PI_2) {
                     return Err("spot outer angle must be in (0, pi/2]");
                 }
                 if !(inner_angle >= 0.0) {

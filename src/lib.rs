@@ -65,6 +65,26 @@
 //! * `n . v < 0` (the eye below the surface): the Phong formula is applied as
 //!   written (see [`Phong`]); hosts flip normals for two-sided shading.
 //!
+//! Lights may carry an emission profile ([`Emission`]; trees built with
+//! [`LightTree::build_emitters`]): light `i` with axis `m_i` emits `I_i
+//! f_i(c_i)` towards `p`, `c_i = m_i . (p - x_i) / |p - x_i|` (the stored
+//! axis, normalized in `f64`), and every term above is multiplied by
+//! `f_i(c_i)`:
+//!
+//! ```text
+//! isotropic   f(c) = 1                                  (PointLight alone)
+//! cosine lobe f(c) = c^k for c > 0, else 0, 0 <= k <= 1e4  (k = 1: a diffuse VPL)
+//! glTF spot   f(c) = t^2, t = clamp((c - cos_outer) / (cos_inner - cos_outer), 0, 1),
+//!             1 for c >= cos_inner, 0 for c <= cos_outer
+//! two-sided   |c| in place of c
+//! ```
+//!
+//! The sign of `m_i . (p - x_i)` is decided exactly, as the tangent plane's
+//! is. A custom [`Shader`](shader::Shader) needs nothing for it: the crate
+//! multiplies its `eval` by the profile's value, and its node bound by the
+//! range of the members' profile values, which each node bounds from a
+//! cone about its members' axes ([`Emission`] documents the profiles).
+//!
 //! [`Shading::exact_query`] (and its one-line form [`Shading::exact`]) sums
 //! the model over every light in `f64` with compensated summation: it is the
 //! reference, and nothing else. Where the model jumps, each term is decided
@@ -142,6 +162,9 @@
 //! * Intensities: finite `f32`, `>= 0` (so up to `3.4e38`); node sums and all
 //!   shading arithmetic are `f64`, so sums of many lights near `f32::MAX`
 //!   neither overflow nor lose the bound.
+//! * Emission: axes finite and non-zero, cosine exponents `0 ..= 1e4`, spot
+//!   angles `0 <= inner <= outer <= pi/2` with `outer > 0`; anything else
+//!   is refused at build time ([`BuildError::InvalidEmission`]).
 //! * Phong exponents `0 ..= 1e6` ([`Phong::MAX_EXPONENT`]); GGX roughness
 //!   `1e-3 ..= 1` and `F0` in `[0, 1]` per channel ([`Ggx`]).
 //! * Results are `f64` ([`glam::DVec3`]). A result is infinite only where the
@@ -153,8 +176,17 @@
 //!
 //! A scene pays for what it uses: a diffuse-only shader computes no
 //! specular term; the default [`Unoccluded`] visibility compiles every
-//! visibility call away; a [`Shading`] session reuses its scratch, so
-//! shading allocates nothing once warmed.
+//! visibility call away; a tree of isotropic lights stores nothing for
+//! emission profiles and takes none of their paths; a [`Shading`] session
+//! reuses its scratch, so shading allocates nothing once warmed.
+//!
+//! Emitters cost more per evaluation than isotropic lights: their lights
+//! are summed in `f64` with each profile's value (the `f32` light sums and
+//! children's bounds are for isotropic lights), each node bound adds its
+//! profile range, and near a point a node whose members' cones may or may
+//! not reach it is summed light by light. Nodes aimed away from a point
+//! cost one evaluation and no light; a diffuse shader bounds a node of
+//! diffuse VPLs about one axis to second order.
 //!
 //! # Feature flags
 //!
@@ -190,8 +222,8 @@ mod visibility;
 
 pub use combined::Combined;
 pub use cut::{ShadeResult, Stop, Target, Threshold};
-pub use error::{BuildError, ShadeError, ValidationError};
 pub use emission::{Emission, Emitter};
+pub use error::{BuildError, ShadeError, ValidationError};
 pub use geometry::Aabb;
 pub use ggx::Ggx;
 pub use lambert::{BoundKind, Lambert};

@@ -68,22 +68,25 @@ struct Sizes {
     city: &'static [(usize, usize)],
     /// VPLs of the room, and points at each.
     room: &'static [(usize, usize)],
-    /// The image.
+    /// The city's image and the room's.
     image: (u32, u32),
+    room_image: (u32, u32),
     /// Paired rounds per timing.
     rounds: usize,
 }
 
 const FULL: Sizes = Sizes {
     city: &[(10_000, 128), (100_000, 64), (1_000_000, 32)],
-    room: &[(100_000, 64), (1_000_000, 32)],
+    room: &[(100_000, 64), (1_000_000, 16)],
     image: (320, 180),
+    room_image: (160, 90),
     rounds: 5,
 };
 const QUICK: Sizes = Sizes {
     city: &[(10_000, 32), (100_000, 16)],
     room: &[(100_000, 16)],
     image: (160, 90),
+    room_image: (80, 45),
     rounds: 3,
 };
 
@@ -297,7 +300,7 @@ fn spot_city(sizes: &Sizes) -> Result<(), Box<dyn Error>> {
             soa_plain.shade(&material, q.point(), n, n)
         })?;
         println!(
-            "| {n} | {count} | {:.0} ({}) | {:.2} | {:.0} | {:.0}x | {:.0} | {:.2} | {:.0}x | {:.2} |",
+            "| {n} | {count} | {:.0} ({}) | {:.2} | {:.0} | {:.1}x | {:.0} | {:.2} | {:.1}x | {:.2} |",
             spot.evaluations,
             spot.max_evaluations,
             spot.us,
@@ -338,7 +341,7 @@ fn spot_city(sizes: &Sizes) -> Result<(), Box<dyn Error>> {
     })?;
     println!(
         "\n  camera view, {n} spot lamps, {}x{}: {} ground pixels through one batch call, {:.2} \
-         us per pixel against {:.0} us for the exact sum: **{:.0}x per pixel**; {:.0}% of pixels \
+         us per pixel against {:.0} us for the exact sum: **{:.1}x per pixel**; {:.0}% of pixels \
          shared a cut; worst error / bound on {} sampled pixels {:.2}",
         sizes.image.0,
         sizes.image.1,
@@ -382,7 +385,10 @@ fn vpl_room(sizes: &Sizes) -> Result<(), Box<dyn Error>> {
         let isotropic = LightTree::build(&plain_lights)?;
         let exact = |q: &Query| soa.shade(Vec3::ONE, q.point(), q.surface().normal.as_vec3());
         let rows = [
-            ("split by axis", per_point("VPL room", &by_axis, &queries, sizes.rounds, exact)?),
+            (
+                "split by axis",
+                per_point("VPL room", &by_axis, &queries, sizes.rounds, exact)?,
+            ),
             (
                 "by position alone",
                 per_point("VPL room", &by_position, &queries, sizes.rounds, exact)?,
@@ -397,7 +403,7 @@ fn vpl_room(sizes: &Sizes) -> Result<(), Box<dyn Error>> {
         ];
         for (label, r) in rows {
             println!(
-                "| {n} | {count} | {label} | {:.0} ({}) | {:.1} | {:.0} | {:.0}x | {:.2} |",
+                "| {n} | {count} | {label} | {:.0} ({}) | {:.1} | {:.0} | {:.2}x | {:.2} |",
                 r.evaluations, r.max_evaluations, r.us, r.exact_us, r.ratio, r.worst
             );
         }
@@ -406,7 +412,8 @@ fn vpl_room(sizes: &Sizes) -> Result<(), Box<dyn Error>> {
     let (n, emitters) = last.ok_or("sizes")?;
     let tree = LightTree::build_emitters(&emitters)?;
     let soa = SoaEmitters::new(&emitters).ok_or("VPLs vectorize")?;
-    let camera = Camera::new(ROOM_EYE, ROOM_TARGET, ROOM_FOV, sizes.image.0, sizes.image.1);
+    let (w, h) = sizes.room_image;
+    let camera = Camera::new(ROOM_EYE, ROOM_TARGET, ROOM_FOV, w, h);
     let queries: Vec<Query> = (0..camera.width * camera.height)
         .filter_map(|i| {
             let d = camera.ray(i % camera.width, i / camera.width);
@@ -419,11 +426,9 @@ fn vpl_room(sizes: &Sizes) -> Result<(), Box<dyn Error>> {
         soa.shade(Vec3::ONE, q.point(), q.surface().normal.as_vec3())
     })?;
     println!(
-        "\n  camera view, {n} VPLs, {}x{}: {} pixels through one batch call, {:.1} us per pixel \
-         against {:.0} us for the exact sum: **{:.0}x per pixel**; {:.0}% of pixels shared a \
+        "\n  camera view, {n} VPLs, {w}x{h}: {} pixels through one batch call, {:.1} us per pixel \
+         against {:.0} us for the exact sum: **{:.2}x per pixel**; {:.0}% of pixels shared a \
          cut; worst error / bound on the sampled pixels {:.2}",
-        sizes.image.0,
-        sizes.image.1,
         row.pixels,
         row.us,
         row.exact_us,

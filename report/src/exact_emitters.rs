@@ -3,7 +3,7 @@
 //! vectorize as [`SoaLights`](crate::exact::SoaLights) is: structure of
 //! arrays in `f32`, chunks of [`LANES`] lights with no data-dependent
 //! branch (each profile's value is a select), lane sums flushed to `f64`
-//! every [`FLUSH_CHUNKS`] chunks, and a copy compiled for AVX2 picked at run
+//! every 128 chunks, and a copy compiled for AVX2 picked at run
 //! time. It is the yardstick the `emitters` part of the report times the
 //! tree against; it agrees with the crate's `f64` `exact_query` to about
 //! `1e-5` relative (checked there).
@@ -140,8 +140,10 @@ impl SoaEmitters {
     }
 }
 
-/// One chunk added to the lane accumulators, every statement lane-wise.
+/// One chunk added to the lane accumulators, every statement lane-wise
+/// (indexed loops over fixed-size arrays, which the compiler vectorizes).
 #[inline(always)]
+#[allow(clippy::needless_range_loop)]
 fn chunk(p: Vec3, n: Vec3, c: &Chunk, acc: &mut [Lanes; 3]) {
     let mut weight = [0.0f32; LANES];
     for l in 0..LANES {

@@ -336,10 +336,12 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
                 region.scratch.above.push((position, scaled));
             }
             // Evaluated by the shader at each point.
-            Side::Across(_) => region
-                .scratch
-                .across
-                .push((position, intensity, Profile::ISOTROPIC)),
+            Side::Across(_) => {
+                region
+                    .scratch
+                    .across
+                    .push((position, intensity, Profile::ISOTROPIC))
+            }
         }
         let values = region.samples.values(position, scaled);
         for (sum, v) in region.steer_settled.iter_mut().zip(values) {
@@ -601,7 +603,11 @@ impl<'s, S: Shader, V: Visibility> Cut<'_, S, V, Shared<'s>> {
         let profile = tree.profile(light);
         match self.ask(seen == Seen::Visible, &here, None) {
             None => return,
-            Some(true) => self.region.scratch.across.push((position, intensity, profile)),
+            Some(true) => self
+                .region
+                .scratch
+                .across
+                .push((position, intensity, profile)),
             Some(false) => {
                 self.region
                     .scratch

@@ -168,8 +168,12 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
             // Counted as evaluated: the lights whose terms are.
             self.work.lights += n as u32;
             let values = &mut values[..n];
-            self.shader
-                .eval_lights(&self.region.per_point, self.region.surface, &lit[..n], values);
+            self.shader.eval_lights(
+                &self.region.per_point,
+                self.region.surface,
+                &lit[..n],
+                values,
+            );
             for (value, f) in values.iter_mut().zip(&factors) {
                 *value *= *f;
             }

@@ -15,9 +15,9 @@ use super::result::{ShadeResult, Stop};
 use super::threshold::{Target, Threshold};
 use crate::LightLanes;
 use crate::geometry::{Cone, Surface};
+use crate::lambert::diffuse_lobe_bound;
 use crate::numeric::{CompensatedSum, SUM_SLACK};
 use crate::shader::{ChildrenOf, NodeEstimate, Seal, Shader};
-use crate::lambert::diffuse_lobe_bound;
 use crate::tree::orientation::Factor;
 use crate::tree::{LightTree, NO_PLANE, Node};
 use crate::visibility::Visibility;
@@ -683,7 +683,14 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
     {
         return result;
     }
-    let region = Point::new(shader, surface, point, threshold, small_lanes, tree.is_oriented());
+    let region = Point::new(
+        shader,
+        surface,
+        point,
+        threshold,
+        small_lanes,
+        tree.is_oriented(),
+    );
     let mut cut = Cut::new(tree, shader, region, threshold, visibility);
     let interpolating = threshold.interpolation().is_some();
     let (list, nesting) = (&mut scratch.list, &mut scratch.nesting);

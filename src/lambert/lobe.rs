@@ -30,12 +30,12 @@
 //! `|hess P| <= 2`, third derivative 0) and `f = r^-4`, whose `k`-th
 //! derivative along a unit vector is at most `(4)_k r^(-4-k)` (the
 //! Gegenbauer polynomials `C_k^(2)` are at most their value at 1, `(4)_k /
-//! k!`). By Leibniz along a unit `e`, `|D^3 g[e, e, e]| <= 1 * 120 + 3 * 2
-//! * 20 + 3 * 2 * 4 = 264` over `r^5`, and for a symmetric tensor that
+//! k!`). By Leibniz along a unit `e`, `|D^3 g[e, e, e]|` is at most `120 +
+//! 3 (2)(20) + 3 (2)(4) = 264` over `r^5`, and for a symmetric tensor that
 //! bounds its norm. On the segment from `c` to a member, `r >= D - R`, so
 //! the member's remainder is at most `264 |h|^3 / (6 (D - R)^5)` with `h =
-//! x - c`, `|h| <= R`: summed, `|R_k| <= 44 I_k kd_k R tr(S_k) / (D -
-//! R)^5`.
+//! x - c` and `|h| <= R`; summed, `|R_k|` is at most `44 I_k kd_k R
+//! tr(S_k) / (D - R)^5`.
 //!
 //! The stored moments differ from the exact ones by the build's rounding
 //! bound `delta` (each entry of `o_k` within `delta R`, of `S_k` within
@@ -132,12 +132,12 @@ pub(crate) fn diffuse_lobe_bound(
         let mut second = 0.0;
         let mut second_abs = 0.0;
         let mut moments = 0.0;
-        for i in 0..3 {
-            for j in 0..3 {
+        for (i, row) in hess.iter().enumerate() {
+            for (j, &h) in row.iter().enumerate() {
                 let sij = entry(s, i, j);
-                second += hess[i][j] * sij;
-                second_abs += (hess[i][j] * sij).abs();
-                moments += hess[i][j].abs() * (delta * radius * radius + F32_ENTRY * sij.abs());
+                second += h * sij;
+                second_abs += (h * sij).abs();
+                moments += h.abs() * (delta * radius * radius + F32_ENTRY * sij.abs());
             }
         }
         second *= 0.5;
@@ -183,7 +183,10 @@ mod tests {
                 PointLight::new(at, colour).with_emission(Emission::cosine(Vec3::X, 1.0))
             })
             .collect();
-        let tree = LightTree::builder().max_leaf_lights(4).build_emitters(&lights).unwrap();
+        let tree = LightTree::builder()
+            .max_leaf_lights(4)
+            .build_emitters(&lights)
+            .unwrap();
         let kd = DVec3::new(0.7, 0.5, 0.3);
         let shading = tree.shading(Lambert::new(kd.as_vec3()));
         let mut taken = 0;
@@ -197,8 +200,7 @@ mod tests {
                 let Some(cone) = node.cone(surface.point) else {
                     continue;
                 };
-                let Some(b) = diffuse_lobe_bound(node, &surface, &cone, DVec3::X, kd)
-                else {
+                let Some(b) = diffuse_lobe_bound(node, &surface, &cone, DVec3::X, kd) else {
                     continue;
                 };
                 taken += 1;

@@ -9,8 +9,8 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::geometry::{Cone, Surface};
 use crate::cut::emitted;
+use crate::geometry::{Cone, Surface};
 use crate::shader::{ChildrenOf, NodeEstimate, SUM_LIGHTS_MAX, Seal, Shader};
 use crate::tree::{LightTree, MAX_CHILDREN, Node};
 

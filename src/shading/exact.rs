@@ -3,9 +3,9 @@
 use glam::{DVec3, Vec3};
 
 use crate::geometry::Surface;
-use crate::tree::LightTree;
 use crate::numeric::CompensatedSum;
 use crate::shader::Shader;
+use crate::tree::LightTree;
 use crate::visibility::Visibility;
 
 /// The model (crate docs, "The model") summed over the lights of `tree`

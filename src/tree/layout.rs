@@ -127,10 +127,9 @@ impl LightTree {
             + self.planes.capacity() * size_of::<[u32; 3]>()
             + self.node_planes.capacity() * size_of::<u32>()
             + self.groups.memory_bytes()
-            + self
-                .orientation
-                .as_ref()
-                .map_or(0, |o| size_of::<super::orientation::Orientation>() + o.memory_bytes())
+            + self.orientation.as_ref().map_or(0, |o| {
+                size_of::<super::orientation::Orientation>() + o.memory_bytes()
+            })
     }
 }
 

@@ -370,7 +370,12 @@ impl LightTree {
     /// every point within `radius` of `centre`, as
     /// [`group_factor`](Self::group_factor) bounds a node's.
     #[inline]
-    pub(crate) fn light_group_factor(&self, leaf_index: usize, centre: DVec3, radius: f64) -> Factor {
+    pub(crate) fn light_group_factor(
+        &self,
+        leaf_index: usize,
+        centre: DVec3,
+        radius: f64,
+    ) -> Factor {
         let Some(o) = &self.orientation else {
             return Factor::ONE;
         };
@@ -436,8 +441,8 @@ mod tests {
         // A node at height 10, radius 1: seen from straight below and from
         // far aside.
         let below = Cone::new(DVec3::ZERO, Vec3::new(0.0, 0.0, 10.0), 1.0).unwrap();
-        let aside = Cone::new(DVec3::new(100.0, 0.0, 10.0), Vec3::new(0.0, 0.0, 10.0), 1.0)
-            .unwrap();
+        let aside =
+            Cone::new(DVec3::new(100.0, 0.0, 10.0), Vec3::new(0.0, 0.0, 10.0), 1.0).unwrap();
         let f = cone.factor(&below);
         assert_eq!((f.lower, f.upper), (1.0, 1.0));
         assert_eq!(cone.factor(&aside).upper, 0.0);

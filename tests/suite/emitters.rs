@@ -7,8 +7,8 @@
 use crate::common::*;
 use glam::{DVec3, Vec3};
 use manylights::{
-    BuildError, Combined, Coverage, Emission, Emitter, Ggx, Lambert, LightTree, NodeRegion,
-    Phong, PointLight, Query, ShadeResult, Threshold, Unoccluded, Visibility,
+    BuildError, Combined, Coverage, Emission, Emitter, Ggx, Lambert, LightTree, NodeRegion, Phong,
+    PointLight, Query, ShadeResult, Threshold, Unoccluded, Visibility,
 };
 use proptest::prelude::*;
 
@@ -28,7 +28,11 @@ fn reference_factor(e: &Emission, light: Vec3, point: Vec3) -> f64 {
             two_sided,
         } => {
             let c = cosine(axis, two_sided);
-            if c > 0.0 { c.powf(f64::from(exponent)) } else { 0.0 }
+            if c > 0.0 {
+                c.powf(f64::from(exponent))
+            } else {
+                0.0
+            }
         }
         Emission::Spot {
             axis,
@@ -37,10 +41,7 @@ fn reference_factor(e: &Emission, light: Vec3, point: Vec3) -> f64 {
             two_sided,
         } => {
             let c = cosine(axis, two_sided);
-            let (co, ci) = (
-                f64::from(outer_angle).cos(),
-                f64::from(inner_angle).cos(),
-            );
+            let (co, ci) = (f64::from(outer_angle).cos(), f64::from(inner_angle).cos());
             if c >= ci {
                 1.0
             } else if c <= co {
@@ -59,13 +60,15 @@ fn reference_factor(e: &Emission, light: Vec3, point: Vec3) -> f64 {
 /// each oriented one two-sided with probability 1/4. The axis is `base`
 /// turned by up to `spread` radians (any direction for a large spread).
 fn emission(base: Vec3) -> impl Strategy<Value = Emission> {
-    let axis = move || (direction(), 0.0f32..=1.0).prop_map(move |(d, t)| {
-        // Between the base and a random direction: axes that mostly agree,
-        // as on one wall, and some that do not.
-        let t = t * t;
-        let a = base.normalize() * (1.0 - t) + d.normalize() * t;
-        if a.length() > 1e-3 { a } else { d }
-    });
+    let axis = move || {
+        (direction(), 0.0f32..=1.0).prop_map(move |(d, t)| {
+            // Between the base and a random direction: axes that mostly agree,
+            // as on one wall, and some that do not.
+            let t = t * t;
+            let a = base.normalize() * (1.0 - t) + d.normalize() * t;
+            if a.length() > 1e-3 { a } else { d }
+        })
+    };
     let exponent = prop_oneof![
         Just(0.0f32),
         Just(1.0f32),
@@ -78,7 +81,7 @@ fn emission(base: Vec3) -> impl Strategy<Value = Emission> {
     let two = prop::bool::weighted(0.25);
     prop_oneof![
         1 => Just(Emission::Isotropic),
-        2 => (axis(), exponent, two.clone()).prop_map(|(a, k, two)| {
+        2 => (axis(), exponent, two).prop_map(|(a, k, two)| {
             let e = Emission::cosine(a, k);
             if two { e.two_sided() } else { e }
         }),
@@ -113,7 +116,12 @@ fn vpl_walls(max: usize) -> impl Strategy<Value = Vec<Emitter>> {
     (
         prop::collection::vec(wall, 1..=4),
         prop::collection::vec(
-            (any::<prop::sample::Index>(), -10.0f32..=10.0, -10.0f32..=10.0, intensity()),
+            (
+                any::<prop::sample::Index>(),
+                -10.0f32..=10.0,
+                -10.0f32..=10.0,
+                intensity(),
+            ),
             1..=max,
         ),
         prop::collection::vec((vec_in(10.0), intensity(), direction()), 0..=3),
@@ -123,7 +131,14 @@ fn vpl_walls(max: usize) -> impl Strategy<Value = Vec<Emitter>> {
                 .into_iter()
                 .map(|(which, u, v, i)| {
                     let (face, at) = walls[which.index(walls.len())];
-                    let axis = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z][face];
+                    let axis = [
+                        Vec3::X,
+                        Vec3::NEG_X,
+                        Vec3::Y,
+                        Vec3::NEG_Y,
+                        Vec3::Z,
+                        Vec3::NEG_Z,
+                    ][face];
                     let p = match face / 2 {
                         0 => Vec3::new(at, u, v),
                         1 => Vec3::new(u, at, v),
@@ -133,7 +148,11 @@ fn vpl_walls(max: usize) -> impl Strategy<Value = Vec<Emitter>> {
                 })
                 .collect();
             for (k, (p, i, d)) in primaries.into_iter().enumerate() {
-                let e = if k % 2 == 0 { Emission::spot(d, 0.3, 0.8) } else { Emission::Isotropic };
+                let e = if k % 2 == 0 {
+                    Emission::spot(d, 0.3, 0.8)
+                } else {
+                    Emission::Isotropic
+                };
                 out.push(PointLight::new(p, i * 10.0).with_emission(e));
             }
             out
@@ -352,13 +371,13 @@ proptest! {
     }
 }
 
-/// The shader's term of one light at `q` (largest channel).
+/// Lambert's term of one light at `q` (largest channel), as the shader
+/// evaluates it.
 fn single_term(shader: &Lambert, q: &Query, light: &PointLight) -> f64 {
     use manylights::shader::Shader;
-    let per_point = shader.prepare(q.surface());
     shader
         .eval(
-            &per_point,
+            &(),
             q.surface(),
             light.position.as_dvec3(),
             light.intensity.as_dvec3(),
@@ -452,15 +471,23 @@ fn coincident_lights_with_opposite_axes() {
         } else {
             Emission::spot(axis, 0.2, 0.7)
         };
-        lights.push(PointLight::new(Vec3::new(1.0, 2.0, 3.0), Vec3::splat(1.0 + i as f32)).with_emission(e));
+        lights.push(
+            PointLight::new(Vec3::new(1.0, 2.0, 3.0), Vec3::splat(1.0 + i as f32)).with_emission(e),
+        );
     }
     let tree = LightTree::build_emitters(&lights).unwrap();
     let (below, exact_below) = shade_once(&tree, Vec3::new(1.0, 2.0, 0.0), Vec3::Z);
     let (above, exact_above) = shade_once(&tree, Vec3::new(1.0, 2.0, 6.0), Vec3::NEG_Z);
     // Straight below and above, each half at full intensity: the sums of
     // the odd and even lights' intensities over the squared distances.
-    let odd: f64 = (0..300).filter(|i| i % 2 == 1).map(|i| 1.0 + f64::from(i)).sum();
-    let even: f64 = (0..300).filter(|i| i % 2 == 0).map(|i| 1.0 + f64::from(i)).sum();
+    let odd: f64 = (0..300)
+        .filter(|i| i % 2 == 1)
+        .map(|i| 1.0 + f64::from(i))
+        .sum();
+    let even: f64 = (0..300)
+        .filter(|i| i % 2 == 0)
+        .map(|i| 1.0 + f64::from(i))
+        .sum();
     assert!((exact_below.x - odd / 9.0).abs() <= 1e-12 * odd);
     assert!((exact_above.x - even / 9.0).abs() <= 1e-12 * even);
     assert!(below.radiance.x > 0.0 && above.radiance.x > 0.0);
@@ -492,7 +519,12 @@ fn a_node_aimed_away_costs_one_evaluation() {
 #[test]
 fn isotropic_emitters_build_the_isotropic_tree() {
     let lights: Vec<PointLight> = (0..5000)
-        .map(|i| PointLight::new(Vec3::new((i % 70) as f32, (i / 70) as f32 * 1.3, 4.0), Vec3::ONE))
+        .map(|i| {
+            PointLight::new(
+                Vec3::new((i % 70) as f32, (i / 70) as f32 * 1.3, 4.0),
+                Vec3::ONE,
+            )
+        })
         .collect();
     let emitters: Vec<Emitter> = lights.iter().map(|&l| l.into()).collect();
     let plain = LightTree::build(&lights).unwrap();
@@ -500,19 +532,26 @@ fn isotropic_emitters_build_the_isotropic_tree() {
     assert_eq!(plain.memory_bytes(), through.memory_bytes());
     assert_eq!(plain.nodes(), through.nodes());
     let p = Vec3::new(30.0, 40.0, 0.0);
-    let a = plain.shading(Lambert::new(Vec3::ONE)).shade(p, Vec3::Z, Threshold::relative(0.01)).unwrap();
-    let b = through.shading(Lambert::new(Vec3::ONE)).shade(p, Vec3::Z, Threshold::relative(0.01)).unwrap();
+    let a = plain
+        .shading(Lambert::new(Vec3::ONE))
+        .shade(p, Vec3::Z, Threshold::relative(0.01))
+        .unwrap();
+    let b = through
+        .shading(Lambert::new(Vec3::ONE))
+        .shade(p, Vec3::Z, Threshold::relative(0.01))
+        .unwrap();
     assert_eq!(a, b);
 }
 
 #[test]
 fn an_oriented_tree_rebuilt_from_isotropic_lights_forgets_its_profiles() {
-    let spots: Vec<Emitter> = (0..200)
-        .map(|i| {
-            PointLight::new(Vec3::new(i as f32, 0.0, 5.0), Vec3::ONE)
-                .with_emission(Emission::spot(Vec3::Z, 0.1, 0.2))
-        })
-        .collect();
+    let spots: Vec<Emitter> =
+        (0..200)
+            .map(|i| {
+                PointLight::new(Vec3::new(i as f32, 0.0, 5.0), Vec3::ONE)
+                    .with_emission(Emission::spot(Vec3::Z, 0.1, 0.2))
+            })
+            .collect();
     let mut tree = LightTree::build_emitters(&spots).unwrap();
     let (r, _) = shade_once(&tree, Vec3::new(50.0, 0.0, 0.0), Vec3::Z);
     assert_eq!(r.radiance, DVec3::ZERO);
@@ -567,7 +606,14 @@ fn grouping_by_axis_splits_a_rooms_walls() {
     // children each hold one face's lights.
     let mut vpls = Vec::new();
     for face in 0..6 {
-        let axis = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z][face];
+        let axis = [
+            Vec3::X,
+            Vec3::NEG_X,
+            Vec3::Y,
+            Vec3::NEG_Y,
+            Vec3::Z,
+            Vec3::NEG_Z,
+        ][face];
         for i in 0..400 {
             let (u, v) = ((i % 20) as f32 / 20.0, (i / 20) as f32 / 20.0);
             let p = match face {
@@ -587,12 +633,23 @@ fn grouping_by_axis_splits_a_rooms_walls() {
     for child in root.children() {
         let lights = tree.nodes()[child].lights();
         let first = tree.original_index(lights.start) / 400;
-        assert!(lights.clone().all(|i| tree.original_index(i) / 400 == first));
+        assert!(
+            lights
+                .clone()
+                .all(|i| tree.original_index(i) / 400 == first)
+        );
     }
-    let plain = LightTree::builder().group_by_axis(false).build_emitters(&vpls).unwrap();
+    let plain = LightTree::builder()
+        .group_by_axis(false)
+        .build_emitters(&vpls)
+        .unwrap();
     assert_ne!(plain.root().unwrap().children().len(), 6);
     for tree in [&tree, &plain] {
-        for p in [Vec3::splat(0.5), Vec3::new(0.1, 0.2, 0.9), Vec3::new(0.95, 0.5, 0.05)] {
+        for p in [
+            Vec3::splat(0.5),
+            Vec3::new(0.1, 0.2, 0.9),
+            Vec3::new(0.95, 0.5, 0.05),
+        ] {
             for n in [Vec3::X, Vec3::NEG_Z, Vec3::new(1.0, -1.0, 0.5)] {
                 shade_once(tree, p, n);
             }
@@ -622,7 +679,11 @@ fn a_street_of_spots_shares_cuts_and_each_point_keeps_its_bound() {
     let queries: Vec<Query> = (0..256)
         .map(|k| {
             let (u, v) = ((k % 16) as f32, (k / 16) as f32);
-            let n = if k % 7 == 0 { Vec3::new(0.2, 0.1, 1.0) } else { Vec3::Z };
+            let n = if k % 7 == 0 {
+                Vec3::new(0.2, 0.1, 1.0)
+            } else {
+                Vec3::Z
+            };
             Query::new(Vec3::new(3000.0 + u * 0.5, -4.0 + v * 0.5, 0.0), n).unwrap()
         })
         .collect();

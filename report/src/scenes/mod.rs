@@ -37,8 +37,8 @@ pub use canopy::canopy;
 pub use chandelier::chandelier;
 pub use ground::{GROUND_SIZE, ground_lights, ground_points};
 pub use night_city::{Building, City, GROUND_ALBEDO, SHADOW_BLOCKS, city_shadows};
-pub use sphere::{SPHERE_RADIUS, sphere_lights};
 pub use room::{POINT_OFFSET, ROOM_SIZE, Room, VPL_OFFSET, isotropic};
+pub use sphere::{SPHERE_RADIUS, sphere_lights};
 pub use streets::{GRID_BLOCK, city, city_lights, lamp_grid, spot_city_lights};
 pub use strings::{
     GLOSSY_EXPONENT, GLOSSY_SCENE_EXPONENT, Glossy, GlossyHit, Sphere, specular, strings,

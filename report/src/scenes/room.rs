@@ -72,19 +72,31 @@ impl Room {
         let mut surfaces = vec![
             // Floor (warm wood), ceiling, four walls (one a muted blue).
             Surface {
-                aabb: aabb(Vec3::new(-WALL, -WALL, -WALL), Vec3::new(s.x + WALL, s.y + WALL, 0.0)),
+                aabb: aabb(
+                    Vec3::new(-WALL, -WALL, -WALL),
+                    Vec3::new(s.x + WALL, s.y + WALL, 0.0),
+                ),
                 albedo: Vec3::new(0.55, 0.38, 0.22),
             },
             Surface {
-                aabb: aabb(Vec3::new(-WALL, -WALL, s.z), Vec3::new(s.x + WALL, s.y + WALL, s.z + WALL)),
+                aabb: aabb(
+                    Vec3::new(-WALL, -WALL, s.z),
+                    Vec3::new(s.x + WALL, s.y + WALL, s.z + WALL),
+                ),
                 albedo: Vec3::splat(0.85),
             },
             Surface {
-                aabb: aabb(Vec3::new(-WALL, -WALL, 0.0), Vec3::new(0.0, s.y + WALL, s.z)),
+                aabb: aabb(
+                    Vec3::new(-WALL, -WALL, 0.0),
+                    Vec3::new(0.0, s.y + WALL, s.z),
+                ),
                 albedo: Vec3::new(0.35, 0.45, 0.7),
             },
             Surface {
-                aabb: aabb(Vec3::new(s.x, -WALL, 0.0), Vec3::new(s.x + WALL, s.y + WALL, s.z)),
+                aabb: aabb(
+                    Vec3::new(s.x, -WALL, 0.0),
+                    Vec3::new(s.x + WALL, s.y + WALL, s.z),
+                ),
                 albedo: wall,
             },
             Surface {
@@ -98,12 +110,36 @@ impl Room {
         ];
         // Furniture: a table, a red sofa, a tall cabinet, a pillar.
         let furniture = [
-            (Vec3::new(3.5, 2.5, 0.72), Vec3::new(5.5, 3.7, 0.78), Vec3::new(0.6, 0.6, 0.6)),
-            (Vec3::new(3.6, 2.6, 0.0), Vec3::new(3.7, 2.7, 0.72), Vec3::splat(0.3)),
-            (Vec3::new(5.3, 3.5, 0.0), Vec3::new(5.4, 3.6, 0.72), Vec3::splat(0.3)),
-            (Vec3::new(1.0, 5.6, 0.0), Vec3::new(3.8, 6.8, 0.8), Vec3::new(0.7, 0.15, 0.12)),
-            (Vec3::new(8.6, 0.2, 0.0), Vec3::new(9.8, 1.0, 2.2), Vec3::new(0.45, 0.6, 0.4)),
-            (Vec3::new(6.6, 4.6, 0.0), Vec3::new(7.1, 5.1, 3.0), Vec3::splat(0.9)),
+            (
+                Vec3::new(3.5, 2.5, 0.72),
+                Vec3::new(5.5, 3.7, 0.78),
+                Vec3::new(0.6, 0.6, 0.6),
+            ),
+            (
+                Vec3::new(3.6, 2.6, 0.0),
+                Vec3::new(3.7, 2.7, 0.72),
+                Vec3::splat(0.3),
+            ),
+            (
+                Vec3::new(5.3, 3.5, 0.0),
+                Vec3::new(5.4, 3.6, 0.72),
+                Vec3::splat(0.3),
+            ),
+            (
+                Vec3::new(1.0, 5.6, 0.0),
+                Vec3::new(3.8, 6.8, 0.8),
+                Vec3::new(0.7, 0.15, 0.12),
+            ),
+            (
+                Vec3::new(8.6, 0.2, 0.0),
+                Vec3::new(9.8, 1.0, 2.2),
+                Vec3::new(0.45, 0.6, 0.4),
+            ),
+            (
+                Vec3::new(6.6, 4.6, 0.0),
+                Vec3::new(7.1, 5.1, 3.0),
+                Vec3::splat(0.9),
+            ),
         ];
         for (min, max, albedo) in furniture {
             surfaces.push(Surface {
@@ -211,11 +247,17 @@ impl Room {
                 let (dir, frame) = match p.spot {
                     Some((axis, _, outer)) => {
                         let z = rng.random_range(outer.cos()..1.0);
-                        (cone_direction(axis.normalize(), z, rng.random_range(0.0..TAU)), omega)
+                        (
+                            cone_direction(axis.normalize(), z, rng.random_range(0.0..TAU)),
+                            omega,
+                        )
                     }
                     None => {
                         let z = rng.random_range(-1.0f32..1.0);
-                        (cone_direction(Vec3::Z, z, rng.random_range(0.0..TAU)), omega)
+                        (
+                            cone_direction(Vec3::Z, z, rng.random_range(0.0..TAU)),
+                            omega,
+                        )
                     }
                 };
                 let Some((at, normal, surface)) = self.hit(p.position, dir) else {

@@ -147,7 +147,7 @@ const SPOT_INNER: (f32, f32) = (0.4, 0.85);
 const SPOT_SEED: u64 = 0x5B07;
 
 /// The lamps of [`city_lights`] as glTF spot lights aimed at the ground:
-/// each axis tilted from straight down by up to [`SPOT_TILT_DEGREES`] in a
+/// each axis tilted from straight down by up to 12 degrees in a
 /// random direction, outer angles 0.6 to 1.2 radians, inner angles 40% to
 /// 85% of the outer.
 pub fn spot_city_lights(count: usize, seed: u64) -> Vec<manylights::Emitter> {

@@ -393,7 +393,10 @@ impl Packing {
         let factor = |node: u32| region.node_factor(tree, node as usize).estimate;
         if cut.blended {
             for &(node, weight) in &scratch.weighted {
-                packed.push_node(&tree.nodes[node as usize], self.kd * (weight * factor(node)));
+                packed.push_node(
+                    &tree.nodes[node as usize],
+                    self.kd * (weight * factor(node)),
+                );
             }
         } else {
             for (e, _) in cut.list.waiting() {
