@@ -97,13 +97,30 @@ fn a_written_scene_reads_back() {
     assert_eq!(scene.albedo.len(), scene.triangles.len());
     assert!(scene.albedo.contains(&Vec3::new(0.8, 0.2, 0.1)));
     assert_eq!((scene.lights.len(), scene.spots), (9, 3));
-    for light in &scene.lights {
+    for e in &scene.lights {
         // In the order the nodes are visited: compare as sets of positions.
-        assert!(
-            lights(9).iter().any(|l| l.position == light.position),
-            "{light:?}"
-        );
+        let light = e.light;
+        let written = lights(9)
+            .into_iter()
+            .find(|l| l.position == light.position)
+            .unwrap_or_else(|| panic!("{light:?}"));
         assert_eq!(light.intensity, Vec3::new(2.0, 1.8, 1.4));
+        // Spots come back as spots, shining down (a node without rotation
+        // points its -z), with the written cone angles.
+        match e.emission {
+            manylights::Emission::Spot {
+                axis,
+                inner_angle,
+                outer_angle,
+                ..
+            } => {
+                assert!(written.spot);
+                assert!(axis.normalize().dot(Vec3::NEG_Z) > 0.9999, "{axis}");
+                assert_eq!((inner_angle, outer_angle), (0.3, 0.6));
+            }
+            manylights::Emission::Isotropic => assert!(!written.spot),
+            other => panic!("{other:?}"),
+        }
     }
     let v = scene.view.expect("a camera");
     assert!(v.eye.distance(view().eye) < 1e-4, "{:?}", v.eye);
@@ -113,7 +130,8 @@ fn a_written_scene_reads_back() {
 }
 
 /// The batch call over points of the file's surfaces, shadowed by its own
-/// triangles, certifies against the exact shadowed sum.
+/// triangles and lit by its point and spot lights, certifies against the
+/// exact shadowed sum.
 #[test]
 fn a_scene_from_a_file_shades_certified() {
     let scene = load(&write_glb(&meshes(), &lights(60), None), None).unwrap();
@@ -121,7 +139,7 @@ fn a_scene_from_a_file_shades_certified() {
         .triangles(&scene.triangles)
         .unwrap()
         .build();
-    let tree = LightTree::build(&scene.lights).unwrap();
+    let tree = LightTree::build_emitters(&scene.lights).unwrap();
     let mut shading = tree.shading(Lambert::new(Vec3::ONE));
     // Points on the ground around the box (some in its shadow) and on its
     // faces.

@@ -1,6 +1,6 @@
 //! A glTF 2.0 scene in, a picture out: meshes occlude and receive light,
-//! `KHR_lights_punctual` point lights emit (spot lights as isotropic point
-//! lights: spot cones are not modelled yet), shaded through
+//! `KHR_lights_punctual` point and spot lights emit (spots through their
+//! cones, the Khronos falloff, as `manylights::Emission::spot`), shaded through
 //! `Shading::shade_batch` with shadows from `manylights-mesh`'s host at a
 //! certified threshold, from the scene's camera (or a default one).
 //!
@@ -80,13 +80,6 @@ fn run() -> Result<(), Box<dyn Error>> {
             scene::load(&builtin(), None)?
         }
     };
-    if scene.spots > 0 {
-        println!(
-            "note: {} spot lights are shaded as isotropic point lights (spot cones are not \
-             modelled yet)",
-            scene.spots
-        );
-    }
     if scene.directional > 0 {
         println!("note: {} directional lights skipped", scene.directional);
     }
@@ -208,13 +201,15 @@ fn render(
     out: &Path,
 ) -> Result<(), Box<dyn Error>> {
     let occluders = Occluders::builder().triangles(&scene.triangles)?.build();
-    let tree = LightTree::build(&scene.lights)?;
+    let tree = LightTree::build_emitters(&scene.lights)?;
     let view = scene.view.unwrap_or_else(|| default_view(scene));
     println!(
-        "{} triangles ({} dropped as degenerate), {} lights, {width}x{height}, certified {}%",
+        "{} triangles ({} dropped as degenerate), {} lights ({} spots), {width}x{height}, \
+         certified {}%",
         occluders.triangles(),
         scene.degenerate,
         scene.lights.len(),
+        scene.spots,
         threshold * 100.0
     );
     let hits = trace(scene, view, width, height);
@@ -319,7 +314,7 @@ fn default_view(scene: &Scene) -> View {
         .triangles
         .iter()
         .flatten()
-        .chain(scene.lights.iter().map(|l| &l.position))
+        .chain(scene.lights.iter().map(|l| &l.light.position))
         .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
             (lo.min(*p), hi.max(*p))
         });

@@ -1,6 +1,7 @@
 //! A glTF 2.0 scene as the `gltf` example renders it: triangles (occluders
 //! and shading surfaces, with their base colours), `KHR_lights_punctual`
-//! point and spot lights (spot lights as isotropic points), and a camera.
+//! point and spot lights (spots with their cones, as `Emission::spot`),
+//! and a camera.
 //! Read with the `gltf` crate from a `.glb` file, or a `.gltf` file whose
 //! buffers are files beside it; written to `.glb` bytes by
 //! [`write_glb`] (the built-in scene and the tests).
@@ -9,7 +10,7 @@ use std::path::Path;
 
 use glam::{Mat4, Vec3};
 use gltf::khr_lights_punctual::Kind;
-use manylights::PointLight;
+use manylights::{Emission, Emitter, PointLight};
 use serde_json::json;
 
 /// A camera: eye, a point it looks at, up, vertical field of view in
@@ -28,10 +29,10 @@ pub struct Scene {
     /// World-space triangles and each one's base colour.
     pub triangles: Vec<[Vec3; 3]>,
     pub albedo: Vec<Vec3>,
-    /// Point lights: the point lights, then the spot lights as isotropic
-    /// points.
-    pub lights: Vec<PointLight>,
-    /// How many of `lights` were spot lights, and directional lights
+    /// The point lights (isotropic) and spot lights (glTF spots along
+    /// their node's `-z`), in the order the nodes are visited.
+    pub lights: Vec<Emitter>,
+    /// How many of `lights` are spot lights, and directional lights
     /// skipped.
     pub spots: usize,
     pub directional: usize,
@@ -241,10 +242,18 @@ pub fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, LoadError> {
             }
             let at = world.transform_point3(Vec3::ZERO);
             match light.kind() {
-                Kind::Point => scene.lights.push(PointLight::new(at, colour)),
-                Kind::Spot { .. } => {
+                Kind::Point => scene.lights.push(PointLight::new(at, colour).into()),
+                Kind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } => {
+                    // A spot shines down its node's local -z.
+                    let axis = world.transform_vector3(-Vec3::Z);
+                    let spot = Emission::spot(axis, inner_cone_angle, outer_cone_angle);
                     scene.spots += 1;
-                    scene.lights.push(PointLight::new(at, colour));
+                    scene
+                        .lights
+                        .push(PointLight::new(at, colour).with_emission(spot));
                 }
                 Kind::Directional => scene.directional += 1,
             }
