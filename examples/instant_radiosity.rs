@@ -159,6 +159,96 @@ fn samples(hits: &[Option<Hit>], (width, height): (u32, u32)) -> Vec<usize> {
         .collect()
 }
 
+/// The exact shadowed sums (unit albedo) at the `sampled` pixels, over
+/// rayon's threads, with a host per pixel.
+fn exact_sums(
+    tree: &LightTree,
+    room: &Room,
+    hits: &[Option<Hit>],
+    sampled: &[usize],
+) -> Result<Vec<DVec3>, ShadeError> {
+    sampled
+        .par_iter()
+        .map_init(
+            || tree.shading(Lambert::new(Vec3::ONE)),
+            |s, &i| {
+                let hit = hits[i].expect("sampled pixels are hit");
+                let host = Shadows::new(&room.occluders, Vec3::ZERO);
+                Ok(s.exact_query(&Query::new(hit.point, hit.normal)?, host))
+            },
+        )
+        .collect()
+}
+
+/// Prints the work per pixel: node bounds and lights, what the batch calls
+/// shared, the hosts' classifications (`answers`: visible, occluded,
+/// partial) and shadow rays (`answers[3]`) against the exact sum's, one
+/// per light.
+fn print_work(
+    results: &[Option<ShadeResult>],
+    batch: &BatchStats,
+    answers: [u64; 4],
+    lights: usize,
+) {
+    print_row(
+        "nodes evaluated per pixel",
+        format!("{:.1}", mean_per_pixel(results, |r| r.nodes_evaluated)),
+    );
+    print_row(
+        "lights evaluated per pixel",
+        format!("{:.1}", mean_per_pixel(results, |r| r.lights_evaluated)),
+    );
+    print_row(
+        "groups sharing a cut",
+        format!(
+            "{} ({} pixels shared, {} alone)",
+            batch.groups, batch.shared_points, batch.points_alone
+        ),
+    );
+    let count = results.iter().flatten().count().max(1) as f64;
+    print_row(
+        "classifications per pixel",
+        format!(
+            "{:.1} ({:.1} for whole groups)",
+            (answers[0] + answers[1] + answers[2]) as f64 / count,
+            batch.shared_classifications as f64 / count
+        ),
+    );
+    print_row(
+        "shadow rays per pixel, tree",
+        format!("{:.1}", answers[3] as f64 / count),
+    );
+    print_row("shadow rays per pixel, exact", lights);
+}
+
+/// Writes `<out>/instant_radiosity_tree.png`: each pixel's unit-albedo
+/// radiance times its surface's albedo, at the exposure that maps
+/// [`EXPOSURE_PERCENTILE`] of the image to white.
+fn write_image(
+    options: &Options,
+    hits: &[Option<Hit>],
+    results: &[Option<ShadeResult>],
+) -> std::io::Result<()> {
+    let image: Vec<DVec3> = hits
+        .iter()
+        .zip(results)
+        .map(|(hit, r)| match (hit, r) {
+            (Some(h), Some(r)) => r.radiance * h.albedo.as_dvec3(),
+            _ => DVec3::ZERO,
+        })
+        .collect();
+    std::fs::create_dir_all(&options.out)?;
+    let path = options.out.join("instant_radiosity_tree.png");
+    write_radiance(
+        &path,
+        options.size(),
+        &image,
+        exposure(&image, EXPOSURE_PERCENTILE),
+    )?;
+    println!("wrote {}", path.display());
+    Ok(())
+}
+
 fn main() -> Result<(), Box<dyn Error>> {
     let options = Options::parse(100_000, (240, 135));
     let size = options.size();
@@ -182,21 +272,8 @@ fn main() -> Result<(), Box<dyn Error>> {
     let (shaded, tree_time) = timed(|| shade(&tree, &room, &hits, size, threshold));
     let (results, batch, answers) = shaded?;
 
-    // The exact shadowed sum on the sampled pixels, one host per pixel.
     let sampled = samples(&hits, size);
-    let (exact, exact_time) = timed(|| {
-        sampled
-            .par_iter()
-            .map_init(
-                || tree.shading(Lambert::new(Vec3::ONE)),
-                |s, &i| {
-                    let hit = hits[i].expect("sampled pixels are hit");
-                    let host = Shadows::new(&room.occluders, Vec3::ZERO);
-                    Ok(s.exact_query(&Query::new(hit.point, hit.normal)?, host))
-                },
-            )
-            .collect::<Result<Vec<DVec3>, ShadeError>>()
-    });
+    let (exact, exact_time) = timed(|| exact_sums(&tree, &room, &hits, &sampled));
     let exact = exact?;
     let checked: Vec<Option<ShadeResult>> = sampled.iter().map(|&i| results[i]).collect();
     let stats = ErrorStats::new(
@@ -265,48 +342,9 @@ fn main() -> Result<(), Box<dyn Error>> {
         "mean certified bound / value",
         format!("{:.3e}", stats.mean_bound_relative),
     );
-    print_row(
-        "nodes evaluated per pixel",
-        format!("{:.1}", mean_per_pixel(&results, |r| r.nodes_evaluated)),
-    );
-    print_row(
-        "lights evaluated per pixel",
-        format!("{:.1}", mean_per_pixel(&results, |r| r.lights_evaluated)),
-    );
-    print_row(
-        "groups sharing a cut",
-        format!(
-            "{} ({} pixels shared, {} alone)",
-            batch.groups, batch.shared_points, batch.points_alone
-        ),
-    );
-    let count = pixels.max(1) as f64;
-    print_row(
-        "classifications per pixel",
-        format!(
-            "{:.1} ({:.1} for whole groups)",
-            (answers[0] + answers[1] + answers[2]) as f64 / count,
-            batch.shared_classifications as f64 / count
-        ),
-    );
-    print_row(
-        "shadow rays per pixel, tree",
-        format!("{:.1}", answers[3] as f64 / count),
-    );
-    print_row("shadow rays per pixel, exact", tree.len());
+    print_work(&results, &batch, answers, tree.len());
     print_row("sampled pixels violating bound", stats.violations);
 
-    let image: Vec<DVec3> = hits
-        .iter()
-        .zip(&results)
-        .map(|(hit, r)| match (hit, r) {
-            (Some(h), Some(r)) => r.radiance * h.albedo.as_dvec3(),
-            _ => DVec3::ZERO,
-        })
-        .collect();
-    std::fs::create_dir_all(&options.out)?;
-    let path = options.out.join("instant_radiosity_tree.png");
-    write_radiance(&path, size, &image, exposure(&image, EXPOSURE_PERCENTILE))?;
-    println!("wrote {}", path.display());
+    write_image(&options, &hits, &results)?;
     stats.ensure_certified()
 }
