@@ -180,7 +180,7 @@ pub struct Timing {
 /// `runs` rounds of one run of `method` (over `points.0` points) and one
 /// of `exact` (over `points.1`), alternating: robust to a machine whose
 /// load drifts.
-fn paired(
+pub fn paired(
     runs: usize,
     points: (usize, usize),
     mut method: impl FnMut(),

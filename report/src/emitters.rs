@@ -26,17 +26,16 @@
 
 use std::error::Error;
 use std::hint::black_box;
-use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use manylights::{Emitter, Lambert, LightTree, Query, ShadeResult, Threshold, Unoccluded};
 
+use crate::batch::paired;
 use crate::camera::Camera;
 use crate::config::SEED;
 use crate::exact::SoaLights;
 use crate::exact_emitters::SoaEmitters;
 use crate::scenes::{self, Material, Room, spot_city_lights};
-use crate::sweep::median;
 
 /// The part's name.
 pub const EMITTERS: &str = "emitters";
@@ -89,31 +88,6 @@ const QUICK: Sizes = Sizes {
     room_image: (80, 45),
     rounds: 3,
 };
-
-/// `rounds` paired rounds of `method` (over `points.0` points) and `exact`
-/// (over `points.1`): the medians of their times per point (microseconds)
-/// and of the rounds' ratios.
-fn paired(
-    rounds: usize,
-    points: (usize, usize),
-    mut method: impl FnMut(),
-    mut exact: impl FnMut(),
-) -> (f64, f64, f64) {
-    let time = |f: &mut dyn FnMut(), n: usize| {
-        let t = Instant::now();
-        f();
-        t.elapsed().as_secs_f64() * 1e6 / n as f64
-    };
-    let (mut a, mut b, mut r) = (Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..rounds {
-        let x = time(&mut method, points.0);
-        let y = time(&mut exact, points.1);
-        a.push(x);
-        b.push(y);
-        r.push(y / x);
-    }
-    (median(a), median(b), median(r))
-}
 
 /// Checks every result against its exact sum; the largest ratio of the
 /// actual error to the bound.
@@ -173,7 +147,7 @@ fn per_point(
     let simd: Vec<DVec3> = queries.iter().map(&mut exact).collect();
     check_soa(what, &simd, &reference)?;
     let mut results = vec![ShadeResult::default(); queries.len()];
-    let (us, exact_us, ratio) = paired(
+    let timing = paired(
         rounds,
         (queries.len(), queries.len()),
         || {
@@ -193,9 +167,9 @@ fn per_point(
     Ok(PointRow {
         evaluations: mean_cost(&results),
         max_evaluations: results.iter().map(ShadeResult::cost).max().unwrap_or(0),
-        us,
-        exact_us,
-        ratio,
+        us: timing.us,
+        exact_us: timing.exact_us,
+        ratio: timing.ratio,
         worst,
     })
 }
@@ -232,7 +206,7 @@ fn per_pixel(
     check_soa(what, &simd, &reference)?;
     let mut results = vec![ShadeResult::default(); queries.len()];
     let mut stats = Ok(Default::default());
-    let (us, exact_us, ratio) = paired(
+    let timing = paired(
         rounds,
         (queries.len(), samples.len()),
         || stats = shading.shade_batch(queries, threshold, Unoccluded, &mut results),
@@ -247,9 +221,9 @@ fn per_pixel(
     let worst = check(what, &sampled, &reference)?;
     Ok(PixelRow {
         pixels: queries.len(),
-        us,
-        exact_us,
-        ratio,
+        us: timing.us,
+        exact_us: timing.exact_us,
+        ratio: timing.ratio,
         worst,
         shared: f64::from(stats.shared_points) / queries.len().max(1) as f64,
     })

@@ -2,6 +2,8 @@
 //! intervals at the point, single lights are evaluated and summed at once,
 //! and the host is asked about a node when the list takes it.
 
+use core::cell::Cell;
+
 use glam::{DVec3, Vec3};
 
 use super::engine::{Cut, Outcome, Pending, Region, seen};
@@ -59,14 +61,37 @@ pub(crate) struct Point<'a, S: Shader> {
     /// Children of the node being refined, waiting to be bounded together
     /// (kept here so that it is set up once per call, not per refinement).
     children: Children,
+    /// What a tree of emitters keeps for this point (held apart, so that a
+    /// tree of isotropic lights neither sets it up nor moves it); `None`
+    /// for isotropic lights.
+    emitters: Option<&'a EmitterScratch>,
+}
+
+/// What the cut of a point keeps for emitters, on the stack of the call
+/// (in cells: the cut reads and notes factors where it holds its region
+/// shared).
+#[derive(Debug)]
+pub(crate) struct EmitterScratch {
     /// The emission factors last computed for nodes (index and factor),
     /// slot `index % 8`: a node's children are contiguous, so those of one
     /// refinement each have their own slot; bounding a child right after
     /// deciding not to sum it reuses its factor.
-    factors: [core::cell::Cell<(u32, Factor)>; CHILDREN],
-    /// The shader's albedo where it is exactly diffuse and the tree holds
-    /// emitters (for [`diffuse_lobe_bound`]), else `None`.
-    diffuse: Option<DVec3>,
+    cache: [Cell<(u32, Factor)>; CHILDREN],
+    /// The factors of the children waiting to be bounded together.
+    children: [Cell<Factor>; CHILDREN],
+    /// The shader's albedo where it is exactly diffuse (for
+    /// [`diffuse_lobe_bound`]), else `None`; set for each point.
+    diffuse: Cell<Option<DVec3>>,
+}
+
+impl Default for EmitterScratch {
+    fn default() -> Self {
+        Self {
+            cache: core::array::from_fn(|_| Cell::new((u32::MAX, Factor::ONE))),
+            children: core::array::from_fn(|_| Cell::new(Factor::ONE)),
+            diffuse: Cell::new(None),
+        }
+    }
 }
 
 impl<S: Shader> Point<'_, S> {
@@ -86,7 +111,7 @@ impl<S: Shader> Point<'_, S> {
         factor: Factor,
     ) -> NodeEstimate {
         let product = emitted(bound, factor);
-        let Some(kd) = self.diffuse else {
+        let Some(kd) = self.emitters.and_then(|e| e.diffuse.get()) else {
             return product;
         };
         let Some(axis) = tree.diffuse_lobe(index) else {
@@ -110,15 +135,17 @@ impl<S: Shader> Point<'_, S> {
     /// Notes node `index`'s emission factor at this point.
     #[inline(always)]
     fn remember(&self, index: usize, factor: Factor) {
-        self.factors[index % CHILDREN].set((index as u32, factor));
+        if let Some(e) = self.emitters {
+            e.cache[index % CHILDREN].set((index as u32, factor));
+        }
     }
 
     /// Node `index`'s emission factor under `cone`, from the note if it is
     /// of that node.
     #[inline(always)]
     fn factor_of(&self, tree: &LightTree, index: usize, cone: &Cone) -> Factor {
-        match self.factors[index % CHILDREN].get() {
-            (i, f) if i as usize == index => f,
+        match self.emitters.map(|e| e.cache[index % CHILDREN].get()) {
+            Some((i, f)) if i as usize == index => f,
             _ => tree.factor(index, cone),
         }
     }
@@ -126,8 +153,8 @@ impl<S: Shader> Point<'_, S> {
 
 impl<'a, S: Shader> Point<'a, S> {
     /// The region of the point `point` (as the host was given it) with
-    /// surface `surface`, for `threshold`, in a tree of emitters if
-    /// `oriented`.
+    /// surface `surface`, for `threshold`; `emitters` (fresh) for a tree of
+    /// emitters, else `None`.
     #[inline(always)]
     pub(crate) fn new(
         shader: &S,
@@ -135,9 +162,12 @@ impl<'a, S: Shader> Point<'a, S> {
         point: Vec3,
         threshold: &Threshold,
         small_lanes: Option<&'a [LightLanes]>,
-        oriented: bool,
+        emitters: Option<&'a EmitterScratch>,
     ) -> Self {
         let interpolating = threshold.interpolation().is_some();
+        if let Some(e) = emitters {
+            e.diffuse.set(shader.diffuse_albedo(Seal));
+        }
         Self {
             surface,
             per_point: shader.prepare(surface),
@@ -156,12 +186,7 @@ impl<'a, S: Shader> Point<'a, S> {
             horizon: shader.horizon(surface),
             dark_plane: (NO_PLANE, false),
             children: Children::default(),
-            factors: core::array::from_fn(|_| core::cell::Cell::new((u32::MAX, Factor::ONE))),
-            diffuse: if oriented {
-                shader.diffuse_albedo(Seal)
-            } else {
-                None
-            },
+            emitters,
         }
     }
 }
@@ -339,10 +364,14 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
                     let factor = cut.region.factor_of(tree, child, &cone);
                     // A child whose members all aim away is exactly 0.
                     if factor.upper > 0.0 {
-                        cut.region.children.push(child as u32, cone, factor);
+                        let region = &mut cut.region;
+                        if let Some(e) = region.emitters {
+                            e.children[region.children.len].set(factor);
+                        }
+                        region.children.push(child as u32, cone);
                     }
                 }
-                Some(cone) => cut.region.children.push(child as u32, cone, Factor::ONE),
+                Some(cone) => cut.region.children.push(child as u32, cone),
                 None => pending.pending(cut.unbounded(child, visible)),
             }
         }
@@ -559,7 +588,9 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
                     index as usize,
                     &children.cones[i],
                     bound,
-                    children.factors[i],
+                    self.region
+                        .emitters
+                        .map_or(Factor::ONE, |e| e.children[i].get()),
                 );
             }
             if let Some(entry) = self.bounded(index as usize, visible, weight, &bound) {
@@ -592,8 +623,6 @@ struct Children {
     len: usize,
     indices: [u32; CHILDREN],
     cones: [Cone; CHILDREN],
-    /// Their emission factors (see [`emitted`]).
-    factors: [Factor; CHILDREN],
     /// Their bounds, once bounded.
     bounds: [NodeEstimate; CHILDREN],
 }
@@ -614,7 +643,6 @@ impl Default for Children {
             len: 0,
             indices: [0; CHILDREN],
             cones: [NONE; CHILDREN],
-            factors: [Factor::ONE; CHILDREN],
             bounds: [NodeEstimate::ZERO; CHILDREN],
         }
     }
@@ -622,10 +650,9 @@ impl Default for Children {
 
 impl Children {
     #[inline(always)]
-    fn push(&mut self, index: u32, cone: Cone, factor: Factor) {
+    fn push(&mut self, index: u32, cone: Cone) {
         self.indices[self.len] = index;
         self.cones[self.len] = cone;
-        self.factors[self.len] = factor;
         self.len += 1;
     }
 }
@@ -683,13 +710,15 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
     {
         return result;
     }
+    // Set up only for a tree of emitters.
+    let emitters = tree.is_oriented().then(EmitterScratch::default);
     let region = Point::new(
         shader,
         surface,
         point,
         threshold,
         small_lanes,
-        tree.is_oriented(),
+        emitters.as_ref(),
     );
     let mut cut = Cut::new(tree, shader, region, threshold, visibility);
     let interpolating = threshold.interpolation().is_some();

@@ -2,12 +2,14 @@
 //! coherent patches and scattered points, both shaders, with and without
 //! occluders; points share cuts where they can.
 
-use crate::common::{cases, check_bound, check_threshold, direction, lights, threshold, vec_in};
+use crate::common::{
+    Wall, cases, check_bound, check_threshold, direction, lights, threshold, vec_in,
+};
 use glam::Vec3;
 use manylights::shader::Shader;
 use manylights::{
-    Combined, Coverage, Ggx, Lambert, LightTree, NodeRegion, Phong, PointGroup, PointLight, Query,
-    ShadeError, ShadeResult, Stop, Threshold, Unoccluded, Visibility,
+    Combined, Coverage, Ggx, Lambert, LightTree, NodeRegion, Phong, PointLight, Query, ShadeError,
+    ShadeResult, Stop, Threshold, Unoccluded, Visibility,
 };
 use proptest::prelude::*;
 
@@ -270,46 +272,6 @@ proptest! {
         for (q, r) in qs.iter().zip(&results) {
             check_bound(r, shading.exact_query(q, &mut alone))?;
         }
-    }
-}
-
-/// An infinite wall in the plane `x = self.x`: a light is hidden when the
-/// segment to it crosses the plane.
-struct Wall {
-    x: f32,
-}
-
-impl Wall {
-    fn side(&self, p: Vec3) -> bool {
-        p.x < self.x
-    }
-}
-
-impl Visibility for Wall {
-    const CLASSIFIES_GROUPS: bool = true;
-
-    fn classify_group(&mut self, group: &PointGroup, node: &NodeRegion) -> Coverage {
-        let here = self.side(group.aabb.min);
-        if self.side(group.aabb.max) != here {
-            return Coverage::Partial;
-        }
-        self.classify(group.aabb.min, node)
-    }
-
-    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
-        let (lo, hi) = (self.side(node.aabb.min), self.side(node.aabb.max));
-        let here = self.side(point);
-        if lo == here && hi == here {
-            Coverage::Visible
-        } else if lo != here && hi != here {
-            Coverage::Occluded
-        } else {
-            Coverage::Partial
-        }
-    }
-
-    fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
-        self.side(point) == self.side(light)
     }
 }
 

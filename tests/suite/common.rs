@@ -16,7 +16,9 @@
 #![allow(dead_code)]
 
 use glam::Vec3;
-use manylights::{PointLight, ShadeResult, Threshold};
+use manylights::{
+    Coverage, NodeRegion, PointGroup, PointLight, ShadeResult, Threshold, Visibility,
+};
 use proptest::prelude::*;
 use proptest::test_runner::FileFailurePersistence;
 
@@ -251,4 +253,46 @@ pub fn check_threshold(r: &ShadeResult, t: &Threshold) -> Result<(), TestCaseErr
         );
     }
     Ok(())
+}
+
+/// A host with an infinite wall in the plane `x = self.x`: a light is
+/// hidden when the segment to it crosses the plane; nodes and groups of
+/// points are classified by their boxes.
+#[derive(Clone, Copy, Debug)]
+pub struct Wall {
+    pub x: f32,
+}
+
+impl Wall {
+    fn side(&self, p: Vec3) -> bool {
+        p.x < self.x
+    }
+}
+
+impl Visibility for Wall {
+    const CLASSIFIES_GROUPS: bool = true;
+
+    fn classify_group(&mut self, group: &PointGroup, node: &NodeRegion) -> Coverage {
+        let here = self.side(group.aabb.min);
+        if self.side(group.aabb.max) != here {
+            return Coverage::Partial;
+        }
+        self.classify(group.aabb.min, node)
+    }
+
+    fn classify(&mut self, point: Vec3, node: &NodeRegion) -> Coverage {
+        let (lo, hi) = (self.side(node.aabb.min), self.side(node.aabb.max));
+        let here = self.side(point);
+        if lo == here && hi == here {
+            Coverage::Visible
+        } else if lo != here && hi != here {
+            Coverage::Occluded
+        } else {
+            Coverage::Partial
+        }
+    }
+
+    fn visible(&mut self, point: Vec3, light: Vec3) -> bool {
+        self.side(point) == self.side(light)
+    }
 }
