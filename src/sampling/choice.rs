@@ -423,8 +423,11 @@ impl Step {
                 wanted |= 1 << i;
             }
         }
+        // Each bounded child's emission factor estimate (1 for isotropic
+        // lights and for children not bounded under a cone).
+        let mut emission = [1.0f64; MAX_CHILDREN];
         if wanted != 0 {
-            bound_wanted(at, parent, first, wanted, &mut kind);
+            bound_wanted(at, parent, first, wanted, &mut kind, &mut emission);
         }
         // The geometric importance's scale: the largest importance per
         // unit of it among the single or tightly bounded children (before
@@ -440,14 +443,14 @@ impl Step {
         for (i, k) in kind.iter().enumerate().take(len) {
             match *k {
                 Kind::Known(importance) => {
-                    g[i] = geometric(&tree.nodes[first + i], point, horizon);
+                    g[i] = geometric(&tree.nodes[first + i], point, horizon) * emission[i];
                     let ratio = importance / g[i];
                     if g[i] > 0.0 && ratio.is_finite() {
                         kappa = kappa.max(ratio);
                     }
                 }
                 Kind::Loose(..) | Kind::Near => {
-                    g[i] = geometric(&tree.nodes[first + i], point, horizon);
+                    g[i] = geometric(&tree.nodes[first + i], point, horizon) * emission[i];
                 }
                 Kind::Dark | Kind::Wanted => {}
             }
@@ -500,7 +503,12 @@ impl Step {
 /// (`first` its first child), setting their kinds: together and coarsely
 /// where the shader can ([`Shader::bound_children_coarse`]), else under
 /// their cones ([`Shader::bound_nodes`]); a child with no cone is
-/// [`Kind::Near`].
+/// [`Kind::Near`]. For emitters, each child bounded under a cone also gets
+/// its emission factor's estimate in `emission` (the profile at the
+/// node's mean axis, [`LightTree::factor`]), which scales its geometric
+/// importance: a node of lights aimed away from the point is worth less
+/// than its intensity says, as pbrt-v4's importance weighs a node by the
+/// cosine of its emission cone.
 #[inline(always)]
 fn bound_wanted<S: Shader>(
     at: &At<'_, S>,
@@ -508,6 +516,7 @@ fn bound_wanted<S: Shader>(
     first: usize,
     wanted: u8,
     kind: &mut [Kind; MAX_CHILDREN],
+    emission: &mut [f64; MAX_CHILDREN],
 ) {
     let tree = at.tree;
     let bits = (0..MAX_CHILDREN).filter(|i| wanted & (1 << i) != 0);
@@ -553,8 +562,9 @@ fn bound_wanted<S: Shader>(
         &mut bounds[..len],
     );
     for (k, (slot, bound)) in slots[..len].iter().zip(&bounds[..len]).enumerate() {
-        let bound = emitted(*bound, tree.factor(first + *slot, &cones[k]));
-        kind[*slot] = bounded(&bound);
+        let factor = tree.factor(first + *slot, &cones[k]);
+        emission[*slot] = factor.estimate;
+        kind[*slot] = bounded(&emitted(*bound, factor));
     }
 }
 

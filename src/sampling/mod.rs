@@ -12,7 +12,7 @@ use crate::tree::LightTree;
 
 pub(crate) use choice::At;
 pub use stochastic::Stochastic;
-pub(crate) use stochastic::shade_stochastic;
+pub(crate) use stochastic::{Tally, shade_stochastic};
 
 /// A light chosen by [`LightSampler::sample`].
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -53,6 +53,25 @@ pub struct Stochastic {
     pub stop: Stop,
 }
 
+/// Nothing estimated yet, to fill a results slice before a batch call
+/// ([`Shading::shade_stochastic_batch`](crate::Shading::shade_stochastic_batch)):
+/// radiance 0 with an infinite variance (it estimates nothing), no work,
+/// stopped by the budget.
+impl Default for Stochastic {
+    fn default() -> Self {
+        Self {
+            radiance: DVec3::ZERO,
+            variance: DVec3::INFINITY,
+            nodes_sampled: 0,
+            nodes_evaluated: 0,
+            lights_evaluated: 0,
+            classify_queries: 0,
+            point_queries: 0,
+            stop: Stop::Budget,
+        }
+    }
+}
+
 /// The stochastic cut of one point: see
 /// [`Shading::shade_stochastic`](crate::Shading::shade_stochastic).
 #[inline(always)]
@@ -70,16 +89,80 @@ pub(crate) fn shade_stochastic<S: Shader, V: Visibility>(
     let settled = settle_point(tree, shader, surface, point, threshold, visibility, list);
     let mut host = settled.visibility;
     let at = At::new(tree, shader, surface);
-    let (mut radiance, mut variance) = (settled.value, DVec3::ZERO);
-    let (mut nodes, mut lights, mut rays) = (0u32, 0u32, 0u32);
+    let mut tally = Tally::new(settled.value);
     for (entry, _) in list.waiting() {
-        nodes += 1;
+        tally.sample_node(&at, entry.node, entry.seen, point, &mut host, uniform);
+    }
+    tally.finish(
+        settled.nodes,
+        settled.lights,
+        settled.classify_queries,
+        settled.point_queries,
+        settled.stop,
+    )
+}
+
+/// One point's stochastic estimate as it is summed: the exactly summed
+/// part, each sampled node's mean of two samples, and the variance
+/// estimate.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Tally {
+    radiance: DVec3,
+    variance: DVec3,
+    nodes: u32,
+    lights: u32,
+    rays: u32,
+}
+
+impl Tally {
+    /// A tally whose exactly summed part is `settled`.
+    #[inline(always)]
+    pub(crate) fn new(settled: DVec3) -> Self {
+        Self {
+            radiance: settled,
+            variance: DVec3::ZERO,
+            nodes: 0,
+            lights: 0,
+            rays: 0,
+        }
+    }
+
+    /// Adds `value` (a light's exact term at the point) to the exactly
+    /// summed part.
+    #[inline(always)]
+    pub(crate) fn add_exact(&mut self, value: DVec3) {
+        self.radiance += value;
+        self.lights += 1;
+    }
+
+    /// Counts a point-to-point query asked for the exactly summed part.
+    #[inline(always)]
+    pub(crate) fn add_ray(&mut self) {
+        self.rays += 1;
+    }
+
+    /// Samples two lights below `node` at the point of `at` (shading
+    /// position `point`) and adds the mean of their terms over their
+    /// probabilities; the host is asked point-to-point about a light that
+    /// contributes unless the node is known visible (`seen`).
+    #[inline(always)]
+    pub(crate) fn sample_node<S: Shader, V: Visibility>(
+        &mut self,
+        at: &At<'_, S>,
+        node: u32,
+        seen: Seen,
+        point: Vec3,
+        host: &mut V,
+        uniform: &mut impl FnMut() -> f64,
+    ) {
+        let (tree, shader, surface) = (at.tree, at.shader, at.surface);
+        self.nodes += 1;
         let mut x = [DVec3::ZERO; SAMPLES_PER_NODE as usize];
         for x in &mut x {
-            let Some((light, p)) = descend(&at, entry.node as usize, uniform()) else {
+            let Some((light, p)) = descend(at, node as usize, uniform()) else {
                 continue;
             };
-            lights += 1;
+            self.lights += 1;
             let profile = tree.profile(light);
             let light = &tree.lights[light];
             let f = shader.eval(
@@ -91,26 +174,38 @@ pub(crate) fn shade_stochastic<S: Shader, V: Visibility>(
             if f == DVec3::ZERO {
                 continue;
             }
-            if entry.seen != Seen::Visible && !V::ALWAYS_VISIBLE {
-                rays += 1;
+            if seen != Seen::Visible && !V::ALWAYS_VISIBLE {
+                self.rays += 1;
                 if !host.visible(point, light.position) {
                     continue;
                 }
             }
             *x = f / p;
         }
-        radiance += 0.5 * (x[0] + x[1]);
+        self.radiance += 0.5 * (x[0] + x[1]);
         let d = x[0] - x[1];
-        variance += 0.25 * d * d;
+        self.variance += 0.25 * d * d;
     }
-    Stochastic {
-        radiance,
-        variance,
-        nodes_sampled: nodes,
-        nodes_evaluated: settled.nodes,
-        lights_evaluated: settled.lights + lights,
-        classify_queries: settled.classify_queries,
-        point_queries: settled.point_queries + rays,
-        stop: settled.stop,
+
+    /// The estimate, with the work of the cut that chose the nodes.
+    #[inline(always)]
+    pub(crate) fn finish(
+        self,
+        nodes_evaluated: u32,
+        lights: u32,
+        classify_queries: u32,
+        point_queries: u32,
+        stop: Stop,
+    ) -> Stochastic {
+        Stochastic {
+            radiance: self.radiance,
+            variance: self.variance,
+            nodes_sampled: self.nodes,
+            nodes_evaluated,
+            lights_evaluated: lights + self.lights,
+            classify_queries,
+            point_queries: point_queries + self.rays,
+            stop,
+        }
     }
 }

@@ -17,7 +17,7 @@ use crate::{BatchStats, ShadeError, ShadeResult, Stop, Threshold};
 
 /// Fewest points worth a shared cut: smaller groups are shaded point by
 /// point.
-const GROUP_MIN_POINTS: usize = 4;
+pub(super) const GROUP_MIN_POINTS: usize = 4;
 /// What a group's shared cut may cost, per point, before the group is
 /// shaded point by point: this share of what a point shaded on its own
 /// costs (node bounds, single lights and host queries), as measured on the
@@ -26,12 +26,12 @@ const GROUP_MIN_POINTS: usize = 4;
 /// best and shades more points alone; more lets costly cuts through.
 /// `cargo run --release -p manylights-report -- batch` measures the call;
 /// `docs/tuning.md` records the shares compared.
-const BUDGET_SHARE: f64 = 0.6;
+pub(super) const BUDGET_SHARE: f64 = 0.6;
 /// See [`BUDGET_SHARE`].
-const MIN_BUDGET_PER_POINT: u64 = 32;
+pub(super) const MIN_BUDGET_PER_POINT: u64 = 32;
 /// Lights a point shaded alone evaluates exactly in the time of one node
 /// bound, in the estimate of what a point costs alone.
-const LIGHTS_PER_BOUND: f64 = 4.0;
+pub(super) const LIGHTS_PER_BOUND: f64 = 4.0;
 /// Rounds of further refinement for the points of a group that missed
 /// their target, before they are shaded on their own.
 const ROUNDS: usize = 3;

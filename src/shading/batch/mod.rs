@@ -7,6 +7,7 @@ mod group;
 mod halo;
 #[cfg(feature = "rayon")]
 mod parallel;
+mod stochastic;
 
 use super::grouping::{Groups, groups};
 use super::packed::Packed;
