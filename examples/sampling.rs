@@ -156,7 +156,7 @@ fn main() -> Result<(), Box<dyn Error + Send + Sync>> {
     let ours = CratePick {
         sampler: view.tree.sampler(Lambert::new(Vec3::ONE)),
     };
-    let pbrt = PbrtPick::new(&view.tree);
+    let pbrt = PbrtPick::new(&view.tree, None);
     // Warm both (caches, thread pool), then time the crate's sampler at
     // `spp` and pbrt-v4's at `spp` to set its equal-time count.
     render(&view.hits, lights, eye, &ours, 1, 1)?;

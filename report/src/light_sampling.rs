@@ -3,6 +3,10 @@
 //! against power sampling, pbrt-v4's BVH importance and Cycles' light tree
 //! importance on the same tree ([`crate::sampling`]); and the crate's
 //! stochastic cut ([`Shading::shade_stochastic`](manylights::Shading::shade_stochastic)).
+//! The scenes: the street city, a sphere of lights seen from orbit, and
+//! instant radiosity's virtual point lights (cosine lobes) in the VPL room
+//! ([`Room`]), where every method's terms and the exact reference carry the
+//! emission profiles.
 //!
 //! ```text
 //! cargo run --release -p manylights-report -- sampling
@@ -23,13 +27,13 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use manylights::query::WithView;
 use manylights::shader::Shader;
-use manylights::{Lambert, LightTree, PointLight, Query, Threshold, Unoccluded};
+use manylights::{Emission, Emitter, Lambert, LightTree, PointLight, Query, Threshold, Unoccluded};
 use rand::RngExt;
 use rayon::prelude::*;
 
 use crate::config::SEED;
 use crate::sampling::{CratePick, CyclesPick, OneSample, PbrtPick, PowerPick};
-use crate::scenes::{SPHERE_RADIUS, SceneRng, city, rng, sphere_lights};
+use crate::scenes::{Room, SPHERE_RADIUS, SceneRng, city, rng, sphere_lights};
 
 /// The part's name on the command line.
 pub const SAMPLING: &str = "sampling";
@@ -53,11 +57,15 @@ const STOCHASTIC_THRESHOLDS: [(&str, Threshold); 3] = [
     ("per-node 10%", Threshold::per_node(0.1)),
 ];
 
-/// A scene of the part: lights, queries, the receivers' albedo, and each
+/// A scene of the part: lights (with their emission profiles when the
+/// scene has oriented emitters), queries, the receivers' albedo, and each
 /// query's exact value.
 struct Case {
     name: String,
     lights: Vec<PointLight>,
+    /// Each light's profile, in the order of `lights`; empty for isotropic
+    /// lights.
+    emission: Vec<Emission>,
     queries: Vec<Query<WithView>>,
     kd: Vec3,
     exact: Vec<DVec3>,
@@ -88,8 +96,18 @@ fn orbit_points(count: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
     out
 }
 
+/// The VPL counts of the room: 10^5 and 10^6 (`--quick`: 10^4).
+fn vpl_counts(quick: bool) -> &'static [usize] {
+    if quick {
+        &[10_000]
+    } else {
+        &[100_000, 1_000_000]
+    }
+}
+
 /// The scenes: the street city at 10^5 and 10^6 lights (`--quick`: 10^4
-/// and 10^5), and 10^5 lights over a sphere seen from orbit.
+/// and 10^5), 10^5 lights over a sphere seen from orbit (`--quick`:
+/// 10^4), and the VPL room's points lit by its VPLs ([`vpl_counts`]).
 fn cases(quick: bool) -> Result<Vec<Case>, Box<dyn Error>> {
     let sizes: [usize; 2] = if quick {
         [10_000, 100_000]
@@ -107,6 +125,7 @@ fn cases(quick: bool) -> Result<Vec<Case>, Box<dyn Error>> {
         out.push(Case {
             name: format!("street city, {n} lights"),
             lights: scene.lights,
+            emission: Vec::new(),
             queries,
             kd: scene.material.kd,
             exact: Vec::new(),
@@ -120,10 +139,28 @@ fn cases(quick: bool) -> Result<Vec<Case>, Box<dyn Error>> {
     out.push(Case {
         name: format!("sphere of lights from orbit, {n} lights"),
         lights: sphere_lights(n, SEED),
+        emission: Vec::new(),
         queries,
         kd: Vec3::splat(0.5),
         exact: Vec::new(),
     });
+    let room = Room::new();
+    for &n in vpl_counts(quick) {
+        let emitters = room.emitters(n, SEED);
+        let queries = room
+            .points(POINTS, SEED)
+            .into_iter()
+            .map(|(p, normal)| Query::new(p, normal)?.with_view(normal))
+            .collect::<Result<_, _>>()?;
+        out.push(Case {
+            name: format!("VPL room, {n} VPLs (cosine lobes) and 4 primary lights"),
+            lights: emitters.iter().map(|e| e.light).collect(),
+            emission: emitters.iter().map(|e| e.emission).collect(),
+            queries,
+            kd: Vec3::splat(0.5),
+            exact: Vec::new(),
+        });
+    }
     Ok(out)
 }
 
@@ -143,26 +180,31 @@ struct Row {
 }
 
 /// The one-sample estimate of `method` at `query`: `f / pmf`, channels
-/// summed.
+/// summed, `f` the light's Lambert term times its profile's factor (the
+/// model's, [`Emission::factor`]) when `emission` has the lights' profiles.
 #[inline]
 fn estimate(
     method: &impl OneSample,
     lambert: &Lambert,
     lights: &[PointLight],
+    emission: &[Emission],
     query: &Query<WithView>,
     u: f64,
 ) -> f64 {
-    let Some((light, pmf)) = method.pick(query, u) else {
+    let Some((index, pmf)) = method.pick(query, u) else {
         return 0.0;
     };
-    let light = &lights[light];
+    let light = &lights[index];
     let f = lambert.eval(
         &(),
         query.surface(),
         light.position.as_dvec3(),
         light.intensity.as_dvec3(),
     );
-    (f.x + f.y + f.z) / pmf
+    let factor = emission
+        .get(index)
+        .map_or(1.0, |e| e.factor(light.position, query.point()));
+    (f.x + f.y + f.z) * factor / pmf
 }
 
 /// Channels summed.
@@ -179,7 +221,8 @@ fn variances(method: &impl OneSample, case: &Case, rng: &mut SceneRng) -> (Vec<f
     for (query, exact) in case.queries.iter().zip(&case.exact) {
         let (mut s, mut s2) = (0.0, 0.0);
         for _ in 0..SAMPLES {
-            let x = estimate(method, &lambert, &case.lights, query, rng.random::<f64>());
+            let u = rng.random::<f64>();
+            let x = estimate(method, &lambert, &case.lights, &case.emission, query, u);
             s += x;
             s2 += x * x;
         }
@@ -208,7 +251,8 @@ fn equal_time(method: &impl OneSample, case: &Case, samples: usize, rng: &mut Sc
             }
             let mut s = 0.0;
             for _ in 0..samples {
-                s += estimate(method, &lambert, &case.lights, query, rng.random::<f64>());
+                let u = rng.random::<f64>();
+                s += estimate(method, &lambert, &case.lights, &case.emission, query, u);
             }
             let e = (s / samples as f64 - exact) / exact;
             total += e * e;
@@ -244,27 +288,45 @@ pub fn run_sampling(quick: bool) -> Result<(), Box<dyn Error>> {
          and summed largest channels, leaf lights by their own importance); Cycles (light \
          tree, 0.5 (p_max + p_min), point-light groups' minimum importance 0); crate \
          (LightSampler: estimates clamped into certified bounds). All on the crate's tree (octree, up to 32 lights a \
-         leaf). No VPL scene: the crate has no oriented emitters yet.\n"
+         leaf). VPL room: the lights' profiles (cosine lobes, spots) \
+         in every term and in the exact reference, the tree built from the emitters; \
+         pbrt-v4's bounds as its area and spot lights' (cone of axes, theta_e), Cycles' \
+         cones likewise; power sampling by intensity.\n"
     );
     for mut case in cases(quick)? {
-        let tree = LightTree::build(&case.lights)?;
+        let emitters: Option<Vec<Emitter>> = (!case.emission.is_empty()).then(|| {
+            case.lights
+                .iter()
+                .zip(&case.emission)
+                .map(|(l, e)| l.with_emission(*e))
+                .collect()
+        });
+        let tree = match &emitters {
+            Some(emitters) => LightTree::build_emitters(emitters)?,
+            None => LightTree::build(&case.lights)?,
+        };
         let shading = tree.shading(Lambert::new(case.kd));
         case.exact = case
             .queries
             .par_iter()
             .map(|q| shading.exact_query(q, Unoccluded))
             .collect();
-        run_case(&case, &tree, quick)?;
+        run_case(&case, &tree, emitters.as_deref(), quick)?;
     }
     Ok(())
 }
 
 /// The tables of one scene.
-fn run_case(case: &Case, tree: &LightTree, quick: bool) -> Result<(), Box<dyn Error>> {
+fn run_case(
+    case: &Case,
+    tree: &LightTree,
+    emitters: Option<&[Emitter]>,
+    quick: bool,
+) -> Result<(), Box<dyn Error>> {
     let mut rng = rng(SEED ^ 0x5A);
     let power = PowerPick::new(&case.lights);
-    let pbrt = PbrtPick::new(tree);
-    let cycles = CyclesPick::new(tree);
+    let pbrt = PbrtPick::new(tree, emitters);
+    let cycles = CyclesPick::new(tree, emitters);
     let ours = CratePick {
         sampler: tree.sampler(Lambert::new(case.kd)),
     };

@@ -25,10 +25,13 @@
 //! casts one shadow ray (`visible`) and counts only if it is unblocked:
 //! neither sampler knows about occluders when it chooses, as in pbrt-v4.
 
+use std::f64::consts::{FRAC_PI_2, PI};
+use std::ops::Range;
+
 use glam::{DVec3, Vec3};
 use manylights::query::WithView;
 use manylights::shader::{Node, Shader, Surface};
-use manylights::{LightTree, PointLight, Query};
+use manylights::{Emission, Emitter, LightTree, PointLight, Query};
 use rand::RngExt;
 
 use crate::scenes::SceneRng;
@@ -402,27 +405,168 @@ fn safe_sqrt(x: f64) -> f64 {
     x.max(0.0).sqrt()
 }
 
-/// pbrt-v4's `LightBounds` of an isotropic emitter group: a box, the summed
-/// power `phi` (each light's largest channel, the `4 pi` left out: it
-/// cancels), the emission cone `cos_o = cos(pi)` about an arbitrary axis
-/// and the falloff `cos_e = cos(pi / 2)`.
+/// `acos` of `x` clamped into `[-1, 1]`.
+#[inline]
+fn safe_acos(x: f64) -> f64 {
+    x.clamp(-1.0, 1.0).acos()
+}
+
+/// The angle between unit vectors `a` and `b`, from the half chord
+/// (accurate near 0 and `pi`, as pbrt-v4's `AngleBetween`).
+fn angle_between(a: DVec3, b: DVec3) -> f64 {
+    if a.dot(b) < 0.0 {
+        PI - 2.0 * ((a + b).length() / 2.0).clamp(-1.0, 1.0).asin()
+    } else {
+        2.0 * ((b - a).length() / 2.0).clamp(-1.0, 1.0).asin()
+    }
+}
+
+/// The unit axis of a profile (`None` for an isotropic one or a zero
+/// axis, which the build refuses).
+fn unit_axis(axis: Vec3) -> Option<DVec3> {
+    let a = axis.as_dvec3().normalize_or_zero();
+    (a != DVec3::ZERO).then_some(a)
+}
+
+/// pbrt-v4's `LightBounds` (its `src/pbrt/lights.h`) of an emitter or a
+/// group of them: a box, the power `phi` (in units of `4 pi` times the
+/// largest channel of an isotropic light's intensity: the `4 pi` cancels
+/// in every ratio), the cone of emitter axes (`axis`, `cos_o`), the
+/// falloff past it (`cos_e`) and whether some member emits along both
+/// ends of its axis.
 #[derive(Clone, Copy, Debug)]
 struct PbrtBounds {
     min: DVec3,
     max: DVec3,
     phi: f64,
+    axis: DVec3,
+    cos_o: f64,
+    cos_e: f64,
+    two_sided: bool,
 }
 
-/// pbrt-v4's `LightBounds::Importance` for isotropic emitters (its
-/// `src/pbrt/lights.cpp`), in `f64`: the squared distance to the box's
-/// centre clamped below by half the diagonal's length (a length against a
-/// squared length, as written there), the emission angle widened by the
-/// box's bounding sphere (`theta_b`, the whole sphere when the point is
-/// inside it), and the incidence angle `|n . w_i|` narrowed by `theta_b`.
+impl PbrtBounds {
+    /// An isotropic emitter's orientation bounds (pbrt-v4's
+    /// `PointLight::Bounds`): `theta_o = pi` about `+z`, `theta_e = pi / 2`.
+    const ISOTROPIC: (DVec3, f64, f64, bool) = (DVec3::Z, -1.0, 0.0, false);
+
+    /// The bounds of `light` emitting with `emission` (pbrt-v4's `Bounds`
+    /// of the light it stands for):
+    ///
+    /// * isotropic: a `PointLight`, power `4 pi I`;
+    /// * a cosine lobe `c^k`: a small `DiffuseAreaLight` for `k = 1` (its
+    ///   normal cone `theta_o = 0`, `theta_e = pi / 2`, power `pi I`, twice
+    ///   that two-sided); other exponents keep `theta_e = pi / 2` (the
+    ///   lobe is 0 past it; pbrt-v4 has no such light) with their power
+    ///   `2 pi I / (k + 1)`, twice that two-sided;
+    /// * a spot: a `SpotLight`, `cos_o` the inner cone's cosine,
+    ///   `theta_e` the outer angle less the inner, power `4 pi I` (as
+    ///   pbrt-v4 keeps it, the cone's solid angle left out).
+    fn of_light(light: &PointLight, emission: &Emission) -> Self {
+        let x = light.position.as_dvec3();
+        let w = f64::from(light.weight());
+        let (phi, (axis, cos_o, cos_e, two_sided)) = match *emission {
+            Emission::Cosine {
+                axis,
+                exponent,
+                two_sided,
+            } => match unit_axis(axis) {
+                Some(axis) => {
+                    let sides = if two_sided { 2.0 } else { 1.0 };
+                    let k = f64::from(exponent);
+                    (sides * w / (2.0 * (k + 1.0)), (axis, 1.0, 0.0, two_sided))
+                }
+                None => (w, Self::ISOTROPIC),
+            },
+            Emission::Spot {
+                axis,
+                inner_angle,
+                outer_angle,
+                two_sided,
+            } => match unit_axis(axis) {
+                Some(axis) => {
+                    let (inner, outer) = (f64::from(inner_angle), f64::from(outer_angle));
+                    (w, (axis, inner.cos(), (outer - inner).cos(), two_sided))
+                }
+                None => (w, Self::ISOTROPIC),
+            },
+            // Isotropic, and any profile this report does not know: the
+            // whole sphere bounds it.
+            _ => (w, Self::ISOTROPIC),
+        };
+        Self {
+            min: x,
+            max: x,
+            phi,
+            axis,
+            cos_o,
+            cos_e,
+            two_sided,
+        }
+    }
+}
+
+/// pbrt-v4's `DirectionCone` union (its `src/pbrt/util/vecmath.cpp`): the
+/// cone about `a` if it holds `b`'s, and conversely; else the cone spanning
+/// both, its axis turned from `a`'s towards `b`'s; the whole sphere (about
+/// `+z`) when that reaches `pi` or the axes are parallel.
+fn cone_union(a: (DVec3, f64), b: (DVec3, f64)) -> (DVec3, f64) {
+    let (theta_a, theta_b) = (safe_acos(a.1), safe_acos(b.1));
+    let theta_d = angle_between(a.0, b.0);
+    if (theta_d + theta_b).min(PI) <= theta_a {
+        return a;
+    }
+    if (theta_d + theta_a).min(PI) <= theta_b {
+        return b;
+    }
+    let theta_o = (theta_a + theta_d + theta_b) / 2.0;
+    let whole = (DVec3::Z, -1.0);
+    if theta_o >= PI {
+        return whole;
+    }
+    let theta_r = theta_o - theta_a;
+    let wr = a.0.cross(b.0);
+    if wr.length_squared() == 0.0 {
+        return whole;
+    }
+    // `a` turned by `theta_r` about `wr` (perpendicular to it).
+    let towards = wr.normalize().cross(a.0);
+    let w = (a.0 * theta_r.cos() + towards * theta_r.sin()).normalize();
+    (w, theta_o.cos())
+}
+
+/// pbrt-v4's `Union` of two `LightBounds`, the box aside (the caller keeps
+/// the tree's): the union of the axis cones, the smaller `cos_e`, summed
+/// power; a bound of zero power is left out.
+fn pbrt_union(a: &PbrtBounds, b: &PbrtBounds) -> PbrtBounds {
+    if a.phi == 0.0 {
+        return *b;
+    }
+    if b.phi == 0.0 {
+        return *a;
+    }
+    let (axis, cos_o) = cone_union((a.axis, a.cos_o), (b.axis, b.cos_o));
+    PbrtBounds {
+        min: a.min.min(b.min),
+        max: a.max.max(b.max),
+        phi: a.phi + b.phi,
+        axis,
+        cos_o,
+        cos_e: a.cos_e.min(b.cos_e),
+        two_sided: a.two_sided | b.two_sided,
+    }
+}
+
+/// pbrt-v4's `LightBounds::Importance` (its `src/pbrt/lights.cpp`), in
+/// `f64`: the squared distance to the box's centre clamped below by half
+/// the diagonal's length (a length against a squared length, as written
+/// there); the angle between the cone's axis and the direction to the
+/// point (`theta_w`, folded for a two-sided bound) narrowed by the cone
+/// (`theta_o`) and by the box's bounding sphere (`theta_b`, the whole
+/// sphere when the point is inside it), 0 past `theta_e`; and the
+/// incidence angle `|n . w_i|` narrowed by `theta_b`. Isotropic bounds
+/// (`theta_o = pi`, `theta_e = pi / 2`) leave only distance and incidence.
 fn pbrt_importance(b: &PbrtBounds, p: DVec3, n: DVec3) -> f64 {
-    // Isotropic emission: theta_o = pi, theta_e = pi / 2.
-    let (cos_o, cos_e) = (-1.0f64, 0.0f64);
-    let axis = DVec3::Z;
     let pc = (b.min + b.max) * 0.5;
     let diagonal = (b.max - b.min).length();
     let d2 = p.distance_squared(pc).max(diagonal / 2.0);
@@ -435,13 +579,16 @@ fn pbrt_importance(b: &PbrtBounds, p: DVec3, n: DVec3) -> f64 {
     };
     let sin_b = safe_sqrt(1.0 - cos_b * cos_b);
     let wi = (p - pc).normalize_or_zero();
-    let cos_w = axis.dot(wi);
+    let mut cos_w = b.axis.dot(wi);
+    if b.two_sided {
+        cos_w = cos_w.abs();
+    }
     let sin_w = safe_sqrt(1.0 - cos_w * cos_w);
-    let sin_o = safe_sqrt(1.0 - cos_o * cos_o);
-    let cos_x = cos_sub_clamped(sin_w, cos_w, sin_o, cos_o);
-    let sin_x = sin_sub_clamped(sin_w, cos_w, sin_o, cos_o);
+    let sin_o = safe_sqrt(1.0 - b.cos_o * b.cos_o);
+    let cos_x = cos_sub_clamped(sin_w, cos_w, sin_o, b.cos_o);
+    let sin_x = sin_sub_clamped(sin_w, cos_w, sin_o, b.cos_o);
     let cos_p = cos_sub_clamped(sin_x, cos_x, sin_b, cos_b);
-    if cos_p <= cos_e {
+    if cos_p <= b.cos_e {
         return 0.0;
     }
     let mut importance = b.phi * cos_p / d2;
@@ -451,41 +598,110 @@ fn pbrt_importance(b: &PbrtBounds, p: DVec3, n: DVec3) -> f64 {
     importance.max(0.0)
 }
 
+/// Each light's emission profile in the tree's leaf order: `emitters`
+/// (the caller's slice, which the tree was built from) through
+/// [`LightTree::original_index`]; isotropic without them.
+fn leaf_emissions(tree: &LightTree, emitters: Option<&[Emitter]>) -> Vec<Emission> {
+    (0..tree.len())
+        .map(|i| emitters.map_or(Emission::Isotropic, |e| e[tree.original_index(i)].emission))
+        .collect()
+}
+
+/// Folds `of` over node `index`'s subtree bottom-up, writing every node's
+/// value into `out`: a leaf's from its lights (leaf-order indices), an
+/// inner node's from its children's.
+fn fold_nodes<T: Copy>(
+    tree: &LightTree,
+    index: usize,
+    out: &mut [T],
+    leaf: &impl Fn(Range<usize>) -> T,
+    inner: &impl Fn(&[T]) -> T,
+) -> T {
+    let node = &tree.nodes()[index];
+    let value = if node.is_leaf() {
+        leaf(node.lights())
+    } else {
+        let children = node.children();
+        for child in children.clone() {
+            out[child] = fold_nodes(tree, child, out, leaf, inner);
+        }
+        inner(&out[children])
+    };
+    out[index] = value;
+    value
+}
+
 /// pbrt-v4's `BVHLightSampler` descent on the crate's tree (its
 /// `src/pbrt/lightsamplers.h`): at each node a child with probability in
-/// proportion to `pbrt_importance` of its bounds (the node's box and
-/// summed largest channels), no sample when every child's is 0; in a leaf
-/// (pbrt's leaves hold one light each, the crate's up to 32) a light in
-/// proportion to its own importance as a point (`phi |cos| / d^2`).
+/// proportion to `pbrt_importance` of its bounds (the node's box, its
+/// members' summed power and the union of their orientation bounds), no
+/// sample when every child's is 0; in a leaf (pbrt's leaves hold one light
+/// each, the crate's up to 32) a light in proportion to the importance of
+/// its own bounds.
 pub struct PbrtPick<'t> {
     tree: &'t LightTree,
+    /// Each node's bounds, in the tree's node order.
+    nodes: Vec<PbrtBounds>,
+    /// Each light's bounds, in the tree's leaf order.
+    lights: Vec<PbrtBounds>,
 }
 
 impl<'t> PbrtPick<'t> {
-    /// The sampler over `tree`.
-    pub fn new(tree: &'t LightTree) -> Self {
-        Self { tree }
+    /// The sampler over `tree`, built from `emitters` when it was built
+    /// from emitters (`None`: isotropic lights). Every node's bounds are
+    /// computed once here, bottom-up: for isotropic lights the node's box
+    /// and summed largest channels with the whole sphere's cone, as
+    /// before emitters existed.
+    pub fn new(tree: &'t LightTree, emitters: Option<&[Emitter]>) -> Self {
+        let emissions = leaf_emissions(tree, emitters);
+        let lights: Vec<PbrtBounds> = tree
+            .lights()
+            .iter()
+            .zip(&emissions)
+            .map(|(l, e)| PbrtBounds::of_light(l, e))
+            .collect();
+        let all = tree.nodes();
+        let placeholder = PbrtBounds::of_light(&PointLight::default(), &Emission::Isotropic);
+        let mut nodes = vec![placeholder; all.len()];
+        if !all.is_empty() {
+            let merge = |bounds: &mut dyn Iterator<Item = PbrtBounds>| {
+                let first = bounds.next().expect("a node has members");
+                bounds.fold(first, |a, b| pbrt_union(&a, &b))
+            };
+            fold_nodes(
+                tree,
+                0,
+                &mut nodes,
+                &|range| merge(&mut lights[range].iter().copied()),
+                &|children| merge(&mut children.iter().copied()),
+            );
+            // The tree's boxes; isotropic lights keep the tree's summed
+            // weights (the orientation bounds are the whole sphere's).
+            for (b, node) in nodes.iter_mut().zip(all) {
+                let aabb = node.aabb();
+                (b.min, b.max) = (aabb.min.as_dvec3(), aabb.max.as_dvec3());
+                if emitters.is_none() {
+                    b.phi = node.weight();
+                }
+            }
+        }
+        Self {
+            tree,
+            nodes,
+            lights,
+        }
     }
 }
 
-/// A node's pbrt bounds.
-fn node_bounds(node: &Node) -> PbrtBounds {
-    let b = node.aabb();
-    PbrtBounds {
-        min: b.min.as_dvec3(),
-        max: b.max.as_dvec3(),
-        phi: node.weight(),
-    }
-}
-
-/// Descends `tree` choosing children by `weigh` (the probabilities of a
-/// node's children, written into the slice; `false` for no sample) and a
-/// leaf's lights by `leaf` (likewise), reusing `u`.
+/// Descends `tree` choosing children by `weigh` (given the index of the
+/// first child and the children; writes their probabilities into the slice;
+/// `false` for no sample) and a leaf's lights by `leaf` (given the leaf
+/// order index of the first light and the lights; likewise), reusing `u`.
 fn descend_tree(
     tree: &LightTree,
     mut u: f64,
-    mut weigh: impl FnMut(&[Node], &mut [f64]) -> bool,
-    mut leaf: impl FnMut(&[PointLight], &mut [f64]) -> bool,
+    mut weigh: impl FnMut(usize, &[Node], &mut [f64]) -> bool,
+    mut leaf: impl FnMut(usize, &[PointLight], &mut [f64]) -> bool,
 ) -> Option<(usize, f64)> {
     let nodes = tree.nodes();
     let mut node = nodes.first()?;
@@ -494,7 +710,7 @@ fn descend_tree(
     while !node.is_leaf() {
         let children = node.children();
         let probabilities = &mut p[..children.len()];
-        if !weigh(&nodes[children.clone()], probabilities) {
+        if !weigh(children.start, &nodes[children.clone()], probabilities) {
             return None;
         }
         let (i, pi, stretched) = invert(probabilities, u)?;
@@ -511,7 +727,7 @@ fn descend_tree(
         big = vec![0.0; lights.len()];
         &mut big[..]
     };
-    if !leaf(lights, probabilities) {
+    if !leaf(range.start, lights, probabilities) {
         return None;
     }
     let (i, pi, _) = invert(probabilities, u)?;
@@ -534,21 +750,21 @@ impl OneSample for PbrtPick<'_> {
         descend_tree(
             self.tree,
             u,
-            |children, out| {
-                for (w, child) in out.iter_mut().zip(children) {
-                    *w = pbrt_importance(&node_bounds(child), p, n);
+            |first, children, out| {
+                for (w, b) in out
+                    .iter_mut()
+                    .zip(&self.nodes[first..first + children.len()])
+                {
+                    *w = pbrt_importance(b, p, n);
                 }
                 normalise(out)
             },
-            |lights, out| {
-                for (w, light) in out.iter_mut().zip(lights) {
-                    let x = light.position.as_dvec3();
-                    let b = PbrtBounds {
-                        min: x,
-                        max: x,
-                        phi: f64::from(light.weight()),
-                    };
-                    *w = pbrt_importance(&b, p, n);
+            |first, lights, out| {
+                for (w, b) in out
+                    .iter_mut()
+                    .zip(&self.lights[first..first + lights.len()])
+                {
+                    *w = pbrt_importance(b, p, n);
                 }
                 normalise(out)
             },
@@ -581,20 +797,149 @@ fn cycles_cos_box(min: DVec3, max: DVec3, p: DVec3, to_centre: DVec3) -> f64 {
     cos_u
 }
 
-/// Cycles' `light_tree_importance` for isotropic point emitters
-/// (`theta_o = pi`, `theta_e = pi / 2`; its `kernel/light/tree.h`) at a
-/// surface without transmission: `(max, min)` importances. For a group of
-/// such emitters the outgoing term is 1 and the minimum importance 0 (the
-/// emission cone is wider than `theta_e`); for a single point emitter
-/// (`theta_o = 0` about the direction to the point) both are `E cos_i /
-/// d^2`.
+/// Cycles' bounding cone (its `scene/light_tree.h` `OrientationBounds`):
+/// every member's axis lies within `theta_o` of `axis`, and each emits
+/// only within `theta_e` past its own axis.
+#[derive(Clone, Copy, Debug)]
+struct CyclesCone {
+    axis: DVec3,
+    theta_o: f64,
+    theta_e: f64,
+}
+
+/// How much an axis may already stick out of a cone for Cycles' merge to
+/// keep that cone: its `5e-4` radians.
+const CYCLES_MERGE_SLACK: f64 = 5e-4;
+
+/// How opposite two axes must be (their cosine below this) for Cycles'
+/// merge to take any axis perpendicular to the wider one: its `-0.9995`.
+const CYCLES_OPPOSITE: f64 = -0.9995;
+
+impl CyclesCone {
+    /// A point light's cone (`theta_o = pi`, `theta_e = pi / 2`; the axis
+    /// is arbitrary).
+    const POINT: Self = Self {
+        axis: DVec3::Z,
+        theta_o: PI,
+        theta_e: FRAC_PI_2,
+    };
+
+    /// Cycles' `merge` (its `scene/light_tree.cpp`): the wider cone if it
+    /// holds the other (within [`CYCLES_MERGE_SLACK`]); else the cone
+    /// spanning both, its axis turned from the wider one's towards the
+    /// other's; `theta_e` the larger.
+    fn merge(self, other: Self) -> Self {
+        let (a, b) = if other.theta_o > self.theta_o {
+            (other, self)
+        } else {
+            (self, other)
+        };
+        let cos_ab = a.axis.dot(b.axis);
+        let theta_d = safe_acos(cos_ab);
+        let theta_e = a.theta_e.max(b.theta_e);
+        if a.theta_o + CYCLES_MERGE_SLACK >= (theta_d + b.theta_o).min(PI) {
+            return Self { theta_e, ..a };
+        }
+        let theta_o = (theta_d + a.theta_o + b.theta_o) * 0.5;
+        if theta_o >= PI {
+            return Self {
+                axis: a.axis,
+                theta_o: PI,
+                theta_e,
+            };
+        }
+        let axis = if cos_ab < CYCLES_OPPOSITE {
+            a.axis.any_orthonormal_vector()
+        } else {
+            let theta_r = theta_o - a.theta_o;
+            let ortho = (b.axis - a.axis * cos_ab).normalize_or_zero();
+            a.axis * theta_r.cos() + ortho * theta_r.sin()
+        };
+        Self {
+            axis,
+            theta_o,
+            theta_e,
+        }
+    }
+}
+
+/// One light of Cycles' tree as the report stands it in.
+#[derive(Clone, Copy, Debug)]
+enum CyclesEmitter {
+    /// A point light: in a leaf, a disk facing the point (`theta_o = 0`
+    /// about the direction from the light to the point).
+    Point,
+    /// An oriented emitter with its own cone; `front_only`: an area light,
+    /// which Cycles gives importance 0 from behind its plane.
+    Oriented { cone: CyclesCone, front_only: bool },
+}
+
+impl CyclesEmitter {
+    /// The Cycles light `emission` stands for, and its cone in the tree:
+    ///
+    /// * isotropic: a point light (`theta_o = pi`, `theta_e = pi / 2`);
+    /// * a one-sided cosine lobe: a small area light (`theta_o = 0` about
+    ///   its axis, `theta_e` half its spread, `pi / 2`; other exponents
+    ///   than 1 kept at `pi / 2`, where the lobe ends); two-sided: as a
+    ///   double-sided emissive triangle, any axis in its plane with
+    ///   `theta_o = pi / 2`;
+    /// * a spot: a spot light (`theta_o = 0`, `theta_e` its outer angle,
+    ///   half Cycles' spot angle); two-sided as the double-sided triangle
+    ///   with the same `theta_e`.
+    fn of(emission: &Emission) -> (Self, CyclesCone) {
+        let oriented = |axis: Vec3, theta_e: f64, two_sided: bool, front_only: bool| {
+            let Some(m) = unit_axis(axis) else {
+                return (Self::Point, CyclesCone::POINT);
+            };
+            let cone = if two_sided {
+                CyclesCone {
+                    axis: m.any_orthonormal_vector(),
+                    theta_o: FRAC_PI_2,
+                    theta_e,
+                }
+            } else {
+                CyclesCone {
+                    axis: m,
+                    theta_o: 0.0,
+                    theta_e,
+                }
+            };
+            let front_only = front_only && !two_sided;
+            (Self::Oriented { cone, front_only }, cone)
+        };
+        match *emission {
+            Emission::Cosine {
+                axis, two_sided, ..
+            } => oriented(axis, FRAC_PI_2, two_sided, true),
+            Emission::Spot {
+                axis,
+                outer_angle,
+                two_sided,
+                ..
+            } => oriented(axis, f64::from(outer_angle), two_sided, false),
+            _ => (Self::Point, CyclesCone::POINT),
+        }
+    }
+}
+
+/// Cycles' `light_tree_importance` (its `kernel/light/tree.h`) at a
+/// surface without transmission, for a cluster or an emitter seen under
+/// `cos_u` (its box's or 1 for a point) at `distance` (minimum and maximum
+/// distance alike): `(max, min)` importances. The incidence term narrowed
+/// and widened by `theta_u`; the outgoing term from the angle `theta`
+/// between the cone's axis and the direction to the point, narrowed by
+/// `theta_u` and `theta_o` (0 past `theta_e`) for the maximum, widened for
+/// the minimum (0 unless the whole cluster lies within `theta_e -
+/// theta_o`). A point light's cone (`theta_o = 0` about the direction to
+/// the point) gives both `E cos_i / d^2`; a group of point lights
+/// (`theta_o = pi`) an outgoing term 1 and a minimum 0.
 fn cycles_importance(
     n: DVec3,
     to_centre: DVec3,
     cos_u: f64,
     distance: f64,
     energy: f64,
-    single: bool,
+    cone: &CyclesCone,
 ) -> (f64, f64) {
     let sin_u = safe_sqrt(1.0 - cos_u * cos_u);
     let cos_i = to_centre.dot(n);
@@ -608,12 +953,41 @@ fn cycles_importance(
         return (0.0, 0.0);
     }
     let cos_max_incidence = (cos_i * cos_u - sin_i * sin_u).max(0.0);
-    let d2 = distance * distance;
-    let max = (cos_min_incidence * energy / d2).abs();
-    let min = if single {
-        (cos_max_incidence * energy / d2).abs()
+    // The axis exactly along the direction to the point: 1, as Cycles
+    // special-cases it.
+    let (cos_t, sin_t) = if cone.axis == -to_centre {
+        (1.0, 0.0)
     } else {
+        let c = cone.axis.dot(-to_centre);
+        (c, safe_sqrt(1.0 - c * c))
+    };
+    let cos_t_minus_u = cos_t * cos_u + sin_t * sin_u;
+    let (sin_o, cos_o) = cone.theta_o.sin_cos();
+    // `theta_o = pi` holds every direction (`cos(theta - theta_u) >=
+    // cos(pi)`), whatever the rounding of the cosines.
+    let cos_min_outgoing = if cos_t >= cos_u || cos_t_minus_u >= cos_o || cone.theta_o >= PI {
+        1.0
+    } else if cone.theta_o + cone.theta_e > PI
+        || cos_t_minus_u > (cone.theta_o + cone.theta_e).cos()
+    {
+        let sin_t_minus_u = safe_sqrt(1.0 - cos_t_minus_u * cos_t_minus_u);
+        cos_t_minus_u * cos_o + sin_t_minus_u * sin_o
+    } else {
+        return (0.0, 0.0);
+    };
+    let d2 = distance * distance;
+    let max = (cos_min_incidence * energy * cos_min_outgoing / d2).abs();
+    let cos_t_plus_u = cos_t * cos_u - sin_t * sin_u;
+    let min = if cone.theta_e - cone.theta_o < 0.0
+        || cos_t < 0.0
+        || cos_u < 0.0
+        || cos_t_plus_u < (cone.theta_e - cone.theta_o).cos()
+    {
         0.0
+    } else {
+        let sin_t_plus_u = safe_sqrt(1.0 - cos_t_plus_u * cos_t_plus_u);
+        let cos_max_outgoing = cos_t_plus_u * cos_o - sin_t_plus_u * sin_o;
+        (cos_max_incidence * energy * cos_max_outgoing / d2).abs()
     };
     (max, min)
 }
@@ -624,16 +998,100 @@ fn cycles_importance(
 /// of positive maximum importance when every minimum is 0, as for groups of
 /// point lights); a node's distance clamped below by half its box's half
 /// diagonal; a node whose box lies behind the tangent plane has
-/// importance 0. In a leaf, its lights likewise as single emitters.
+/// importance 0. In a leaf, its lights likewise as single emitters: point
+/// lights as disks facing the point, oriented ones with their own cones
+/// (an area light also 0 from behind). Each node's cone (the merge of its
+/// members') is computed once, bottom-up.
 pub struct CyclesPick<'t> {
     tree: &'t LightTree,
+    /// Each node's cone, in the tree's node order.
+    nodes: Vec<CyclesCone>,
+    /// Each light as an emitter, in the tree's leaf order.
+    lights: Vec<CyclesEmitter>,
 }
 
 impl<'t> CyclesPick<'t> {
-    /// The sampler over `tree`.
-    pub fn new(tree: &'t LightTree) -> Self {
-        Self { tree }
+    /// The sampler over `tree`, built from `emitters` when it was built
+    /// from emitters (`None`: isotropic lights, every cone a point
+    /// light's).
+    pub fn new(tree: &'t LightTree, emitters: Option<&[Emitter]>) -> Self {
+        let (lights, cones): (Vec<CyclesEmitter>, Vec<CyclesCone>) = leaf_emissions(tree, emitters)
+            .iter()
+            .map(CyclesEmitter::of)
+            .unzip();
+        let mut nodes = vec![CyclesCone::POINT; tree.nodes().len()];
+        if !nodes.is_empty() {
+            let merge = |cones: &[CyclesCone]| {
+                let (first, rest) = cones.split_first().expect("a node has members");
+                rest.iter().fold(*first, |a, b| a.merge(*b))
+            };
+            fold_nodes(
+                tree,
+                0,
+                &mut nodes,
+                &|range| merge(&cones[range]),
+                &|children| merge(children),
+            );
+        }
+        Self {
+            tree,
+            nodes,
+            lights,
+        }
     }
+}
+
+/// Cycles' `light_tree_node_importance` of a node of the crate's tree
+/// with cone `cone` at `p` with normal `n`: 0 when its box lies behind the
+/// tangent plane; else seen under its box's angle from the box's centre,
+/// the distance clamped below by half the box's half diagonal.
+fn cycles_node_importance(node: &Node, cone: &CyclesCone, p: DVec3, n: DVec3) -> (f64, f64) {
+    let b = node.aabb();
+    let (bmin, bmax) = (b.min.as_dvec3(), b.max.as_dvec3());
+    let centre = 0.5 * (bmin + bmax);
+    let extent = bmax - centre;
+    if n.dot(centre - p) + n.abs().dot(extent.abs()) <= 0.0 {
+        return (0.0, 0.0);
+    }
+    let distance = (centre - p).length();
+    let to_centre = (centre - p) / distance;
+    let cos_u = cycles_cos_box(bmin, bmax, p, to_centre);
+    let distance = distance.max(0.5 * (centre - bmax).length());
+    let energy = luminance(node.intensity());
+    cycles_importance(n, to_centre, cos_u, distance, energy, cone)
+}
+
+/// Cycles' `light_tree_emitter_importance` of one light at `p` with
+/// normal `n`: a point light as a disk facing the point, an oriented one
+/// under its own cone (an area light 0 from behind its plane); 0 for a
+/// light on the point.
+fn cycles_light_importance(
+    light: &PointLight,
+    emitter: &CyclesEmitter,
+    p: DVec3,
+    n: DVec3,
+) -> (f64, f64) {
+    let offset = light.position.as_dvec3() - p;
+    let distance = offset.length();
+    if distance == 0.0 {
+        return (0.0, 0.0);
+    }
+    let to_light = offset / distance;
+    let cone = match emitter {
+        CyclesEmitter::Point => CyclesCone {
+            axis: -to_light,
+            theta_o: 0.0,
+            theta_e: FRAC_PI_2,
+        },
+        CyclesEmitter::Oriented { cone, front_only } => {
+            if *front_only && !(cone.axis.dot(to_light) < 0.0) {
+                return (0.0, 0.0);
+            }
+            *cone
+        }
+    };
+    let energy = luminance(light.intensity.as_dvec3());
+    cycles_importance(n, to_light, 1.0, distance, energy, &cone)
 }
 
 /// Cycles' choice `0.5 (max_i / sum max + min_i / sum min)` of the
@@ -667,27 +1125,16 @@ impl OneSample for CyclesPick<'_> {
         descend_tree(
             self.tree,
             u,
-            |children, out| {
-                for ((w, lo), child) in out.iter_mut().zip(min.iter_mut()).zip(children) {
-                    let b = child.aabb();
-                    let (bmin, bmax) = (b.min.as_dvec3(), b.max.as_dvec3());
-                    let centre = 0.5 * (bmin + bmax);
-                    let extent = bmax - centre;
-                    // Behind the tangent plane: importance 0.
-                    if n.dot(centre - p) + n.abs().dot(extent.abs()) <= 0.0 {
-                        (*w, *lo) = (0.0, 0.0);
-                        continue;
-                    }
-                    let distance = (centre - p).length();
-                    let to_centre = (centre - p) / distance;
-                    let cos_u = cycles_cos_box(bmin, bmax, p, to_centre);
-                    let distance = distance.max(0.5 * (centre - bmax).length());
-                    let energy = luminance(child.intensity());
-                    (*w, *lo) = cycles_importance(n, to_centre, cos_u, distance, energy, false);
+            |first, children, out| {
+                let cones = &self.nodes[first..first + children.len()];
+                for (((w, lo), child), cone) in
+                    out.iter_mut().zip(min.iter_mut()).zip(children).zip(cones)
+                {
+                    (*w, *lo) = cycles_node_importance(child, cone, p, n);
                 }
                 cycles_mix(out, &min[..out.len()])
             },
-            |lights, out| {
+            |first, lights, out| {
                 let mut spare;
                 let lows = if lights.len() <= lows_kept.len() {
                     &mut lows_kept[..lights.len()]
@@ -695,19 +1142,168 @@ impl OneSample for CyclesPick<'_> {
                     spare = vec![0.0; lights.len()];
                     &mut spare[..]
                 };
-                for ((w, lo), light) in out.iter_mut().zip(lows.iter_mut()).zip(lights) {
-                    let offset = light.position.as_dvec3() - p;
-                    let distance = offset.length();
-                    if distance == 0.0 {
-                        (*w, *lo) = (0.0, 0.0);
-                        continue;
-                    }
-                    let energy = luminance(light.intensity.as_dvec3());
-                    (*w, *lo) =
-                        cycles_importance(n, offset / distance, 1.0, distance, energy, true);
+                let emitters = &self.lights[first..first + lights.len()];
+                for (((w, lo), light), emitter) in out
+                    .iter_mut()
+                    .zip(lows.iter_mut())
+                    .zip(lights)
+                    .zip(emitters)
+                {
+                    (*w, *lo) = cycles_light_importance(light, emitter, p, n);
                 }
                 cycles_mix(out, lows)
             },
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use manylights::shader::Shader;
+    use manylights::{Lambert, Query};
+    use rand::RngExt;
+
+    use super::*;
+    use crate::scenes::rng;
+
+    /// Slack on angles for the `f64` rounding of the cones' `acos`,
+    /// normalisations and turns: a few hundred ulps of `pi`.
+    const ANGLE_ROUNDING: f64 = 1e-12;
+
+    /// A few thousand emitters of every profile in a 4 m cube.
+    fn emitters(count: usize, seed: u64) -> Vec<Emitter> {
+        let mut rng = rng(seed);
+        let unit = |rng: &mut crate::scenes::SceneRng| loop {
+            let v = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            if v.length_squared() > 0.01 && v.length_squared() <= 1.0 {
+                return v;
+            }
+        };
+        (0..count)
+            .map(|i| {
+                let position = Vec3::new(
+                    rng.random_range(0.0..4.0),
+                    rng.random_range(0.0..4.0),
+                    rng.random_range(0.0..4.0),
+                );
+                let intensity = Vec3::new(
+                    rng.random_range(0.1..1.0),
+                    rng.random_range(0.1..1.0),
+                    rng.random_range(0.1..1.0),
+                );
+                let axis = unit(&mut rng);
+                let outer: f32 = rng.random_range(0.2..1.5);
+                let inner = outer * rng.random_range(0.0..1.0);
+                let emission = match i % 6 {
+                    0 => Emission::Isotropic,
+                    1 => Emission::cosine(axis, 1.0),
+                    2 => Emission::cosine(axis, 1.0).two_sided(),
+                    3 => Emission::cosine(axis, 4.0),
+                    4 => Emission::spot(axis, inner, outer),
+                    _ => Emission::spot(axis, inner, outer).two_sided(),
+                };
+                PointLight::new(position, intensity).with_emission(emission)
+            })
+            .collect()
+    }
+
+    /// Every node's cone holds its members' cones: exactly (up to
+    /// rounding) for pbrt-v4's union, within Cycles' merge slack per merge
+    /// for Cycles'.
+    #[test]
+    fn node_cones_hold_their_members() {
+        let emitters = emitters(3000, 7);
+        let tree = LightTree::build_emitters(&emitters).unwrap();
+        let pbrt = PbrtPick::new(&tree, Some(&emitters));
+        let cycles = CyclesPick::new(&tree, Some(&emitters));
+        let (_, cones): (Vec<_>, Vec<_>) = leaf_emissions(&tree, Some(&emitters))
+            .iter()
+            .map(CyclesEmitter::of)
+            .unzip();
+        let largest_leaf = tree.nodes().iter().map(|n| n.light_count()).max().unwrap();
+        let merges = (largest_leaf + tree.depth() as usize) as f64;
+        for (index, node) in tree.nodes().iter().enumerate() {
+            let (b, c) = (&pbrt.nodes[index], &cycles.nodes[index]);
+            for i in node.lights() {
+                let l = &pbrt.lights[i];
+                let spread = angle_between(b.axis, l.axis) + safe_acos(l.cos_o);
+                assert!(
+                    spread.min(PI) <= safe_acos(b.cos_o) + ANGLE_ROUNDING,
+                    "node {index} light {i}"
+                );
+                assert!(b.cos_e <= l.cos_e && (b.two_sided || !l.two_sided));
+                let m = &cones[i];
+                let spread = angle_between(c.axis, m.axis) + m.theta_o;
+                assert!(spread.min(PI) <= c.theta_o + CYCLES_MERGE_SLACK * merges);
+                assert!(c.theta_e >= m.theta_e);
+            }
+        }
+    }
+
+    /// Wherever a light lights the point (a positive Lambert term and
+    /// profile), pbrt-v4's importance of the light and of every node
+    /// holding it is positive, and so is Cycles' maximum importance of the
+    /// light: neither sampler misses a lit light through its cones.
+    #[test]
+    fn lit_lights_have_positive_importance() {
+        let emitters = emitters(2000, 11);
+        let tree = LightTree::build_emitters(&emitters).unwrap();
+        let pbrt = PbrtPick::new(&tree, Some(&emitters));
+        let cycles = CyclesPick::new(&tree, Some(&emitters));
+        let emissions = leaf_emissions(&tree, Some(&emitters));
+        let lambert = Lambert::new(Vec3::ONE);
+        let mut rng = rng(13);
+        let mut checked = 0;
+        for _ in 0..40 {
+            let p = Vec3::new(
+                rng.random_range(-1.0..5.0),
+                rng.random_range(-1.0..5.0),
+                rng.random_range(-1.0..5.0),
+            );
+            let normal = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            let Ok(query) = Query::new(p, normal) else {
+                continue;
+            };
+            let surface = query.surface();
+            let (pd, nd) = (surface.point, surface.normal);
+            let lit: Vec<bool> = tree
+                .lights()
+                .iter()
+                .zip(&emissions)
+                .map(|(l, e)| {
+                    let f =
+                        lambert.eval(&(), surface, l.position.as_dvec3(), l.intensity.as_dvec3());
+                    f.max_element() > 0.0 && e.factor(l.position, p) > 0.0
+                })
+                .collect();
+            for (i, light) in tree.lights().iter().enumerate() {
+                if lit[i] {
+                    checked += 1;
+                    assert!(
+                        pbrt_importance(&pbrt.lights[i], pd, nd) > 0.0,
+                        "pbrt light {i}"
+                    );
+                    let (max, _) = cycles_light_importance(light, &cycles.lights[i], pd, nd);
+                    assert!(max > 0.0, "Cycles light {i}");
+                }
+            }
+            for (index, node) in tree.nodes().iter().enumerate() {
+                if lit[node.lights()].iter().any(|&l| l) {
+                    assert!(
+                        pbrt_importance(&pbrt.nodes[index], pd, nd) > 0.0,
+                        "pbrt node {index}"
+                    );
+                }
+            }
+        }
+        assert!(checked > 1000, "{checked} lit lights");
     }
 }
