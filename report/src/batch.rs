@@ -89,12 +89,12 @@ pub const HIGH: (u32, u32) = (1280, 720);
 const SMALL: (u32, u32) = (160, 90);
 /// Side of the street city's blocks (see [`city_lights`]): the camera and
 /// the scanline sit at fixed places on the block grid.
-const BLOCK: f32 = 60.0;
+pub(crate) const BLOCK: f32 = 60.0;
 /// The camera, relative to the block corner nearest the city's centre:
 /// eye, target, vertical field of view in degrees.
-const EYE: Vec3 = Vec3::new(22.0, -35.0, 30.0);
-const TARGET: Vec3 = Vec3::new(52.0, 45.0, 0.0);
-const FOV_DEGREES: f32 = 50.0;
+pub(crate) const EYE: Vec3 = Vec3::new(22.0, -35.0, 30.0);
+pub(crate) const TARGET: Vec3 = Vec3::new(52.0, 45.0, 0.0);
+pub(crate) const FOV_DEGREES: f32 = 50.0;
 /// Relative thresholds of the sweep.
 pub const THRESHOLDS: [f64; 8] = [0.01, 0.02, 0.05, 0.07, 0.1, 0.15, 0.2, 0.5];
 /// The threshold of the headline and of the single-point comparison.
@@ -156,7 +156,7 @@ struct SeamRow {
 
 /// The ground point each pixel of `camera`'s image sees (`None` for the
 /// sky), row-major.
-fn ground_hits(camera: &Camera) -> Vec<Option<Vec3>> {
+pub(crate) fn ground_hits(camera: &Camera) -> Vec<Option<Vec3>> {
     (0..camera.width * camera.height)
         .map(|i| {
             let d = camera.ray(i % camera.width, i / camera.width);

@@ -49,5 +49,6 @@ pub mod scaling;
 pub mod scenes;
 pub mod shadowed;
 pub mod shadows;
+pub mod stochastic_batch;
 pub mod summary;
 pub mod sweep;

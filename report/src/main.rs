@@ -11,6 +11,7 @@
 //! cargo run --release -p manylights-report -- anatomy         # where a cut's work goes
 //! cargo run --release -p manylights-report -- ggx             # GGX against Phong and the exact sum
 //! cargo run --release -p manylights-report -- sampling        # light sampling for path tracers
+//! cargo run --release -p manylights-report -- stochastic-batch # the stochastic cut over an image
 //! cargo run --release -p manylights-report -- emitters        # spot lights and virtual point lights
 //! ```
 //!
@@ -36,7 +37,10 @@
 //! lobe and the vectorized exact GGX sum, [`manylights_report::ggx`]) and
 //! `sampling` (one light per shading point by the crate's `LightSampler`
 //! against power sampling, pbrt-v4's and Cycles' importances on the same
-//! tree, and the stochastic cut; a few minutes) and `emitters` (spot
+//! tree, and the stochastic cut; a few minutes), `stochastic-batch` (the
+//! stochastic cut over the batch part's camera view, pixel by pixel against
+//! the batch call sharing its cut, [`manylights_report::stochastic_batch`])
+//! and `emitters` (spot
 //! lights on the street city and instant radiosity's virtual point lights
 //! in a room, per point and per pixel, [`manylights_report::emitters`]).
 //! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
@@ -81,6 +85,7 @@ use manylights_report::occluded::run_occluded;
 use manylights_report::plot::{plot_scaling, plot_scene};
 use manylights_report::scaling::run_scaling;
 use manylights_report::scenes::{canopy, city_shadows};
+use manylights_report::stochastic_batch::{STOCHASTIC_BATCH, run_stochastic_batch};
 use manylights_report::summary::summary;
 use manylights_report::sweep::run_scene;
 
@@ -122,6 +127,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                     CITY_MESH,
                     GGX,
                     SAMPLING,
+                    STOCHASTIC_BATCH,
                     EMITTERS,
                 ]
                 .contains(&name) =>
@@ -132,7 +138,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
                      [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {CITY_MESH} | {SHADOWS} | \
-                     {SCALING} | {ANATOMY} | {GGX} | {SAMPLING} | {EMITTERS}]...",
+                     {SCALING} | {ANATOMY} | {GGX} | {SAMPLING} | {STOCHASTIC_BATCH} | {EMITTERS}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -172,13 +178,16 @@ fn main() -> Result<(), Box<dyn Error>> {
     if named(SAMPLING) {
         run_sampling(quick)?;
     }
+    if named(STOCHASTIC_BATCH) {
+        run_stochastic_batch(quick)?;
+    }
     if named(EMITTERS) {
         run_emitters(quick)?;
     }
     if !parts.is_empty()
         && parts
             .iter()
-            .all(|p| p == ANATOMY || p == GGX || p == SAMPLING || p == EMITTERS)
+            .all(|p| [ANATOMY, GGX, SAMPLING, STOCHASTIC_BATCH, EMITTERS].contains(&p.as_str()))
     {
         return Ok(());
     }

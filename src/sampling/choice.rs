@@ -503,12 +503,16 @@ impl Step {
 /// (`first` its first child), setting their kinds: together and coarsely
 /// where the shader can ([`Shader::bound_children_coarse`]), else under
 /// their cones ([`Shader::bound_nodes`]); a child with no cone is
-/// [`Kind::Near`]. For emitters, each child bounded under a cone also gets
-/// its emission factor's estimate in `emission` (the profile at the
-/// node's mean axis, [`LightTree::factor`]), which scales its geometric
-/// importance: a node of lights aimed away from the point is worth less
-/// than its intensity says, as pbrt-v4's importance weighs a node by the
-/// cosine of its emission cone.
+/// [`Kind::Near`]. For emitters, each child also gets an estimate of its
+/// emission towards the point in `emission` (the profile at the node's
+/// mean axis: under the child's cone, [`LightTree::factor`]; where its
+/// ball reaches the point, for the direction from its centroid,
+/// [`LightTree::factor_towards`]), which scales its geometric importance:
+/// a node of lights aimed away from the point is worth less than its
+/// intensity says, as pbrt-v4's importance weighs a node by the cosine of
+/// its emission cone. (Virtual lights on a ceiling, facing down, seen
+/// from a point on the ceiling among them: their emission towards it is
+/// about 0, and so is what they give.)
 #[inline(always)]
 fn bound_wanted<S: Shader>(
     at: &At<'_, S>,
@@ -550,7 +554,10 @@ fn bound_wanted<S: Shader>(
                 (slots[len], cones[len], nodes[len]) = (i, cone, node);
                 len += 1;
             }
-            None => kind[i] = Kind::Near,
+            None => {
+                kind[i] = Kind::Near;
+                emission[i] = tree.factor_towards(first + i, at.surface.point);
+            }
         }
     }
     let mut bounds = [NodeEstimate::ZERO; MAX_CHILDREN];

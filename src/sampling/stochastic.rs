@@ -8,13 +8,20 @@ use super::choice::{At, descend};
 use crate::Threshold;
 use crate::cut::{ErrorList, Seen, Stop, settle_point};
 use crate::geometry::Surface;
-use crate::shader::Shader;
+use crate::shader::{SUM_LIGHTS_MAX, Shader};
 use crate::tree::LightTree;
 use crate::visibility::Visibility;
 
 /// Samples drawn inside each node the cut leaves: two, so that their
 /// difference gives an unbiased estimate of the variance.
 pub(crate) const SAMPLES_PER_NODE: u32 = 2;
+
+/// Nodes of at most this many lights, known visible, are summed exactly
+/// rather than sampled: two descents evaluate every light of the leaf each
+/// reaches (to choose among them by their exact terms), and a node of this
+/// many lights spans at most two leaves of the default builder, so its
+/// exact sum costs no more than its two samples and leaves no variance.
+pub(crate) const SUM_INSTEAD_LIGHTS: usize = 64;
 
 /// An unbiased estimate of one shading point's radiance from
 /// [`Shading::shade_stochastic`](crate::Shading::shade_stochastic), with an
@@ -25,7 +32,8 @@ pub(crate) const SAMPLES_PER_NODE: u32 = 2;
 pub struct Stochastic {
     /// The estimate: the cut's exactly summed part plus, for each node it
     /// left, the mean of two sampled lights' terms divided by their
-    /// probabilities. Its expectation is the model's exact value (with
+    /// probabilities (or, for a node of at most 64 lights known visible,
+    /// its exact sum). Its expectation is the model's exact value (with
     /// the host's visibility).
     pub radiance: DVec3,
     /// An unbiased estimate of the variance of `radiance` per channel:
@@ -38,7 +46,9 @@ pub struct Stochastic {
     /// however large the node's variance. Average it over many calls (or
     /// points) before judging an error by it.
     pub variance: DVec3,
-    /// Nodes the cut left, each sampled twice.
+    /// Nodes the cut left that were sampled, twice each (nodes of at most
+    /// 64 lights known visible are summed exactly instead: that costs no
+    /// more than their two samples).
     pub nodes_sampled: u32,
     /// Nodes bounded by the cut (as [`ShadeResult::nodes_evaluated`](crate::ShadeResult::nodes_evaluated)).
     pub nodes_evaluated: u32,
@@ -156,6 +166,11 @@ impl Tally {
         uniform: &mut impl FnMut() -> f64,
     ) {
         let (tree, shader, surface) = (at.tree, at.shader, at.surface);
+        let range = tree.nodes[node as usize].lights();
+        if (seen == Seen::Visible || V::ALWAYS_VISIBLE) && range.len() <= SUM_INSTEAD_LIGHTS {
+            self.sum_lights(at, range);
+            return;
+        }
         self.nodes += 1;
         let mut x = [DVec3::ZERO; SAMPLES_PER_NODE as usize];
         for x in &mut x {
@@ -185,6 +200,29 @@ impl Tally {
         self.radiance += 0.5 * (x[0] + x[1]);
         let d = x[0] - x[1];
         self.variance += 0.25 * d * d;
+    }
+
+    /// Adds the exact terms of the lights `range` (leaf order), known
+    /// visible, to the exactly summed part.
+    #[inline(always)]
+    fn sum_lights<S: Shader>(&mut self, at: &At<'_, S>, range: core::ops::Range<usize>) {
+        let tree = at.tree;
+        let mut values = [DVec3::ZERO; SUM_LIGHTS_MAX];
+        let mut index = range.start;
+        for lights in tree.lights[range].chunks(SUM_LIGHTS_MAX) {
+            let values = &mut values[..lights.len()];
+            at.shader
+                .eval_lights(&at.per_point, at.surface, lights, values);
+            for (light, value) in lights.iter().zip(values.iter()) {
+                self.radiance += if tree.is_oriented() {
+                    *value * tree.profile(index).factor(light.position, at.surface.point)
+                } else {
+                    *value
+                };
+                index += 1;
+            }
+            self.lights += lights.len() as u32;
+        }
     }
 
     /// The estimate, with the work of the cut that chose the nodes.

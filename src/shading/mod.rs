@@ -180,8 +180,10 @@ impl<S: Shader> Shading<'_, S> {
     /// An unbiased estimate of the radiance at `query`, with an unbiased
     /// estimate of its variance: a certified cut at `threshold` (a coarse
     /// one, say a relative 10% to 30%), then two lights sampled inside each
-    /// node it leaves, as [`LightSampler`](crate::LightSampler) descends
-    /// the tree from that node (Stochastic Lightcuts, Yuksel 2019, with the
+    /// node it leaves (a node of at most 64 lights known visible is summed
+    /// exactly instead, which costs no more), as
+    /// [`LightSampler`](crate::LightSampler) descends the tree from that
+    /// node (Stochastic Lightcuts, Yuksel 2019, with the
     /// cut's own certified bounds choosing the cut). What the cut settled
     /// it sums exactly (lights in `f64`; no coarse `f32` sums, no
     /// interpolation); each node's two samples `f / p` are averaged. The

@@ -349,6 +349,24 @@ impl LightTree {
         }
     }
 
+    /// An estimate (not a bound) of node `index`'s emission towards
+    /// `point`: its members' profile at the node's mean axis for the
+    /// direction from its centroid to the point, as a light sampler's
+    /// importance takes it where the node's ball reaches the point and no
+    /// cone bounds the directions. 1 for a tree of isotropic lights, or at
+    /// the centroid itself.
+    #[inline]
+    pub(crate) fn factor_towards(&self, index: usize, point: DVec3) -> f64 {
+        let Some(o) = &self.orientation else {
+            return 1.0;
+        };
+        let towards = (point - self.nodes[index].centroid.as_dvec3()).normalize_or_zero();
+        if towards == DVec3::ZERO {
+            return 1.0;
+        }
+        o.cones[index].factor_within(towards, 0.0, 1.0).estimate
+    }
+
     /// The emission profiles' bounds of node `index` over every point
     /// within `radius` of `centre` (a group of points): every direction
     /// from a member (within the node's radius of its centroid) to such a

@@ -104,6 +104,21 @@ proptest! {
         let both = Combined::new(Lambert::new(Vec3::splat(0.3)), phong);
         check_query(&tree.sampler(both), &lights, &query)?;
     }
+
+    /// GGX, `alpha` log-uniform over its range, with a view.
+    #[test]
+    fn ggx_probabilities_sum_to_one_and_match(
+        lights in lights(300),
+        point in crate::common::vec_in(12.0),
+        normal in crate::common::direction(),
+        view in crate::common::direction(),
+        log_alpha in (1e-3f32).ln()..=0.0,
+    ) {
+        let tree = LightTree::builder().max_leaf_lights(4).build(&lights).unwrap();
+        let query = Query::new(point, normal).unwrap().with_view(view).unwrap();
+        let ggx = manylights::Ggx::new(Vec3::new(0.9, 0.6, 0.3), log_alpha.exp());
+        check_query(&tree.sampler(ggx), &lights, &query)?;
+    }
 }
 
 /// The chi-square statistic's critical value for `dof` degrees of freedom
