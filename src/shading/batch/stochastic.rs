@@ -70,6 +70,17 @@ impl<S: Shader> Shading<'_, S> {
     /// `uniform` supplies the random numbers, uniform in `[0, 1)`: two per
     /// node sampled at each point.
     ///
+    /// Whether sharing pays: the shared cut costs a group once, but each
+    /// point still draws its own samples, and at coarse thresholds the
+    /// descents cost more than the cut; a group's cut, valid for all its
+    /// points, also leaves more nodes than one point's. `cargo run
+    /// --release -p manylights-report -- stochastic-batch` measures the
+    /// two ways over a camera's image, time and variance.
+    ///
+    /// Allocation: as [`shade_batch`](Self::shade_batch), the Morton order
+    /// and group list (linear in the batch); the session's scratch space is
+    /// reused across calls.
+    ///
     /// ```
     /// use glam::Vec3;
     /// use manylights::{Lambert, LightTree, PointLight, Query, Stochastic, Threshold, Unoccluded};
