@@ -208,10 +208,11 @@ pub(crate) fn start_is_dark<S: Shader>(at: &At<'_, S>, index: usize) -> bool {
 /// `I c / max(D^2, (R / NEAR_DIVISOR)^2)`, with `I` the intensity's
 /// channels summed, `D` the distance from the point to the centroid, `R`
 /// the radius, and `c` the mean clamped cosine [`soft_cosine`] of the
-/// node's lights against the shader's horizon vector (1 when the ball
-/// reaches the point or the shader has no horizon). It is what the node
-/// would give through a constant BRDF; `Step::of` scales it by the
-/// shader's measured ratio.
+/// node's lights against the shader's horizon vector (1 when the shader
+/// has no horizon; where the ball reaches the point, the same mean cosine
+/// over the clamped distance, at least [`NEAR_COSINE_FLOOR`]). It is what
+/// the node would give through a constant BRDF; `Step::of` scales it by
+/// the shader's measured ratio.
 #[inline(always)]
 fn geometric(node: &Node, point: DVec3, horizon: Option<DVec3>) -> f64 {
     let radius = f64::from(node.radius);
@@ -224,11 +225,22 @@ fn geometric(node: &Node, point: DVec3, horizon: Option<DVec3>) -> f64 {
     }
     let cosine = match horizon {
         Some(axis) if d2 > radius * radius => soft_cosine(node, offset, d2, axis),
+        Some(axis) => soft_cosine(node, offset, floor, axis).max(NEAR_COSINE_FLOOR),
         _ => 1.0,
     };
     let g = scalar(node.intensity) * cosine / floor;
     if g.is_finite() { g } else { 0.0 }
 }
+
+/// The least cosine [`geometric`] gives a node whose ball reaches the
+/// point: there the modelled heights say little about lights that
+/// surround the point, and a cosine of 0 starves nodes that carry much of
+/// the light (with no floor the mean one-sample variance rose 13-fold on
+/// the street city). A cosine of 1 there instead gives a flat node around
+/// the point, in its tangent plane (virtual lights on a ceiling, seen from
+/// the ceiling), far more than it is worth. `cargo run --release -p
+/// manylights-report -- sampling` measures it (`docs/tuning.md`).
+const NEAR_COSINE_FLOOR: f64 = 0.25;
 
 /// `sqrt(3)`: the half-width of the uniform distribution of unit variance.
 const UNIFORM_HALF_WIDTH: f64 = 1.732_050_807_568_877_2;

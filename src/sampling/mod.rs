@@ -61,7 +61,10 @@ pub struct Sampled {
 /// distance to its centroid, `R` its radius, `c` the mean clamped cosine
 /// of its lights against the shader's horizon vector, their heights above
 /// the tangent plane modelled as uniform with the variance of the node's
-/// second moments (1 when the ball reaches the point). `kappa` is
+/// second moments (where the ball reaches the point, over the clamped
+/// distance and at least 1/4). Over emitters `g` is also scaled by the
+/// node's emission towards the point (its members' profile at the node's
+/// mean axis). `kappa` is
 /// the largest ratio of importance to `g` among the single or tightly
 /// bounded siblings (1 when none). The shader's estimate is close to the
 /// exact contribution where the interval is tight (far nodes); where it is
