@@ -163,17 +163,15 @@ impl<S: Shader> Shading<'_, S> {
         S: Accepts<M>,
     {
         let r = self.shade_query(query, threshold, visibility)?;
-        // Lights summed exactly cost a fraction of a node bound each.
-        let cost = f64::from(r.nodes_evaluated)
-            + f64::from(r.lights_evaluated) / LIGHTS_PER_BOUND
-            + f64::from(r.classify_queries)
-            + f64::from(r.point_queries);
-        let estimate = &mut self.scratch.batch.alone_cost;
-        *estimate = if *estimate == 0.0 {
-            cost.max(1.0)
-        } else {
-            0.875 * *estimate + 0.125 * cost
-        };
+        note_alone_cost(
+            &mut self.scratch.batch.alone_cost,
+            [
+                r.nodes_evaluated,
+                r.lights_evaluated,
+                r.classify_queries,
+                r.point_queries,
+            ],
+        );
         Ok(r)
     }
 
@@ -215,13 +213,7 @@ impl<S: Shader> Shading<'_, S> {
         // The group's geometry takes in its halo: the cut serves those
         // points too.
         let halo = group_members.halo.iter().map(|h| &h.0);
-        let surfaces = (members.iter().chain(halo)).map(|&i| *queries[i as usize].surface());
-        let group = GroupBounds::new(surfaces);
-        let last = members.len() - 1;
-        let samples = Samples::new(|k| {
-            let s = queries[members[k * last / (SAMPLES - 1)] as usize].surface();
-            (s.point, s.normal)
-        });
+        let (group, samples) = group_geometry(queries, members, halo);
         let Shading {
             tree,
             shader,
@@ -300,6 +292,41 @@ impl<S: Shader> Shading<'_, S> {
         stats.points_alone += members.len() as u32 - shared;
         Ok(())
     }
+}
+
+/// Folds what a point shaded alone cost (its node bounds, lights, host
+/// classifications and point-to-point queries: `work`) into the running
+/// `estimate` that sets the groups' budgets. Lights summed exactly cost a
+/// fraction of a node bound each.
+#[inline]
+pub(super) fn note_alone_cost(estimate: &mut f64, work: [u32; 4]) {
+    let [nodes, lights, classify, rays] = work.map(f64::from);
+    let cost = nodes + lights / LIGHTS_PER_BOUND + classify + rays;
+    *estimate = if *estimate == 0.0 {
+        cost.max(1.0)
+    } else {
+        0.875 * *estimate + 0.125 * cost
+    };
+}
+
+/// A group's geometry, over its `members` and `extra` points (indices
+/// into `queries`), and the members that steer a relative target, spread
+/// along the group (at least one member). Inlined into the callers, which
+/// are compiled for AVX2 where the processor has it.
+#[inline(always)]
+pub(super) fn group_geometry<'q, M>(
+    queries: &[Query<M>],
+    members: &'q [u32],
+    extra: impl Iterator<Item = &'q u32> + Clone,
+) -> (GroupBounds, Samples) {
+    let surfaces = (members.iter().chain(extra)).map(|&i| *queries[i as usize].surface());
+    let group = GroupBounds::new(surfaces);
+    let last = members.len() - 1;
+    let samples = Samples::new(|k| {
+        let s = queries[members[k * last / (SAMPLES - 1)] as usize].surface();
+        (s.point, s.normal)
+    });
+    (group, samples)
 }
 
 /// The points of a group (and of its halo) and what they sum over one

@@ -253,13 +253,7 @@ impl<S: Shader> Shading<'_, S> {
     where
         S: Accepts<M>,
     {
-        if queries.len() != results.len() {
-            return Err(ShadeError::BatchLength {
-                queries: queries.len(),
-                results: results.len(),
-            });
-        }
-        threshold.check()?;
+        check_batch(queries.len(), results.len(), &threshold)?;
         if !self.shares::<V>(&threshold) {
             for (query, result) in queries.iter().zip(results.iter_mut()) {
                 *result = self.shade_query(query, threshold, &mut visibility)?;
@@ -286,4 +280,13 @@ impl<S: Shader> Shading<'_, S> {
             && threshold.budget().is_none()
             && threshold.max_contribution().is_none()
     }
+}
+
+/// A batch call's arguments: as many results as queries, a valid
+/// threshold.
+fn check_batch(queries: usize, results: usize, threshold: &Threshold) -> Result<(), ShadeError> {
+    if queries != results {
+        return Err(ShadeError::BatchLength { queries, results });
+    }
+    threshold.check()
 }

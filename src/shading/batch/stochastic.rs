@@ -6,9 +6,11 @@
 use glam::{DVec3, Vec3};
 
 use super::BatchStats;
-use super::group::{BUDGET_SHARE, GROUP_MIN_POINTS, LIGHTS_PER_BOUND, MIN_BUDGET_PER_POINT};
-use crate::cut::{Cut, SAMPLES, Samples, Shared, Spend};
-use crate::geometry::{GroupBounds, Surface};
+use super::group::{
+    BUDGET_SHARE, GROUP_MIN_POINTS, MIN_BUDGET_PER_POINT, group_geometry, note_alone_cost,
+};
+use crate::cut::{Cut, Shared, Spend};
+use crate::geometry::Surface;
 use crate::sampling::{At, Stochastic, Tally};
 use crate::shader::{Seal, Shader};
 use crate::shading::grouping::{Groups, groups};
@@ -121,13 +123,7 @@ impl<S: Shader> Shading<'_, S> {
     where
         S: Accepts<M>,
     {
-        if queries.len() != results.len() {
-            return Err(ShadeError::BatchLength {
-                queries: queries.len(),
-                results: results.len(),
-            });
-        }
-        threshold.check()?;
+        super::check_batch(queries.len(), results.len(), &threshold)?;
         let mut call = Call {
             queries,
             threshold,
@@ -166,15 +162,15 @@ impl<S: Shader> Shading<'_, S> {
             &mut *visibility,
             &mut call.uniform,
         )?;
-        let cost = f64::from(r.nodes_evaluated)
-            + f64::from(r.lights_evaluated) / LIGHTS_PER_BOUND
-            + f64::from(r.classify_queries)
-            + f64::from(r.point_queries);
-        call.alone_cost = if call.alone_cost == 0.0 {
-            cost.max(1.0)
-        } else {
-            0.875 * call.alone_cost + 0.125 * cost
-        };
+        note_alone_cost(
+            &mut call.alone_cost,
+            [
+                r.nodes_evaluated,
+                r.lights_evaluated,
+                r.classify_queries,
+                r.point_queries,
+            ],
+        );
         call.results[i] = r;
         call.stats.points_alone += 1;
         Ok(())
@@ -226,13 +222,7 @@ impl<S: Shader> Shading<'_, S> {
         kd: DVec3,
     ) -> Result<(), TooCostly> {
         let queries = call.queries;
-        let surfaces = points.iter().map(|&i| *queries[i as usize].surface());
-        let group = GroupBounds::new(surfaces);
-        let last = points.len() - 1;
-        let samples = Samples::new(|k| {
-            let s = queries[points[k * last / (SAMPLES - 1)] as usize].surface();
-            (s.point, s.normal)
-        });
+        let (group, samples) = group_geometry(queries, points, [].iter());
         let Shading {
             tree,
             shader,
