@@ -218,3 +218,175 @@ fn a_point_far_beyond_the_edge_of_a_city_sees_it_at_a_grazing_angle() {
         );
     }
 }
+
+/// The cost cap of a point's cut: it finishes as the exact sum of its
+/// lights once it has spent a share of `N` (a node bound counting as eight
+/// lights), so it never takes much more than `N` evaluations, and bounds at
+/// most `N / 64` nodes and a constant (a walk down to the leaves bounds
+/// about `N / 16`).
+fn at_most_about_all_lights(r: &manylights::ShadeResult, lights: usize) -> bool {
+    eprintln!(
+        "{} nodes, {} lights for {lights} lights",
+        r.nodes_evaluated, r.lights_evaluated
+    );
+    r.cost() as usize <= lights + lights / 64 + 512
+        && r.nodes_evaluated as usize <= lights / 64 + 512
+}
+
+/// Deterministic uniform numbers in `[0, 1)` (a 64-bit LCG's high bits).
+fn uniforms(seed: u64) -> impl FnMut() -> f32 {
+    let mut state = seed;
+    move || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Lights exactly in the plane `x + y + z = 0` (coordinates multiples of
+/// `1/64`, so that `z = -(x + y)` is exact), a point in the plane among
+/// them, and a normal slightly off the plane's, as smooth shading gives on
+/// a roof: every node at every level straddles the tangent plane. With
+/// the normal exactly the plane's, every light lies in the tangent plane
+/// and the whole scene is exactly 0.
+#[test]
+fn a_normal_slightly_off_a_plane_of_lights_costs_about_the_exact_sum() {
+    const LIGHTS: usize = 100_000;
+    let mut u = uniforms(57);
+    let lights: Vec<PointLight> = (0..LIGHTS)
+        .map(|_| {
+            let x = ((u() - 0.5) * 400.0 * 64.0).round() / 64.0;
+            let y = ((u() - 0.5) * 400.0 * 64.0).round() / 64.0;
+            PointLight::new(Vec3::new(x, y, -(x + y)), Vec3::new(1.0, 0.8, 0.6))
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::ONE));
+    let p = Vec3::new(0.25, -0.5, 0.25);
+    for e in [1e-7f32, 1e-5, 1e-3] {
+        let normal = Vec3::new(1.0, 1.0, 1.0 + e).normalize();
+        let exact = s.exact(p, normal).unwrap();
+        let r = s.shade(p, normal, Threshold::relative(0.01)).unwrap();
+        assert!(r.certifies(exact), "e = {e}: {r:?}");
+        assert!(
+            r.error_bound.cmple(exact * 0.01).all(),
+            "e = {e}: {r:?} against {exact}"
+        );
+        assert!(
+            at_most_about_all_lights(&r, LIGHTS),
+            "e = {e}: {} evaluations for {LIGHTS} lights",
+            r.cost()
+        );
+    }
+    let flat = Vec3::ONE.normalize();
+    let r = s.shade(p, flat, Threshold::relative(0.01)).unwrap();
+    assert_eq!(r.radiance, glam::DVec3::ZERO, "{r:?}");
+    assert!(r.cost() <= 1, "{r:?}");
+}
+
+/// Lights at distances `2^-k` from a point in random directions, the point
+/// at the cluster's centre: every node's ball holds the point or nearly,
+/// at every scale.
+#[test]
+fn a_point_at_the_centre_of_a_geometric_cluster_costs_about_the_exact_sum() {
+    const LIGHTS: usize = 100_000;
+    let mut u = uniforms(1998);
+    let centre = Vec3::new(3.0, -2.0, 1.0);
+    let lights: Vec<PointLight> = (0..LIGHTS)
+        .map(|i| {
+            let k = (i % 40) as i32;
+            let direction = Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5).normalize_or(Vec3::Z);
+            PointLight::new(centre + direction * 2f32.powi(-k), Vec3::ONE)
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::ONE));
+    for t in [0.01, 0.1] {
+        for normal in [Vec3::Z, Vec3::new(0.3, -0.5, 0.8).normalize()] {
+            let exact = s.exact(centre, normal).unwrap();
+            let r = s.shade(centre, normal, Threshold::relative(t)).unwrap();
+            assert!(r.certifies(exact), "{r:?}");
+            assert!(
+                at_most_about_all_lights(&r, LIGHTS),
+                "at {t}: {} evaluations for {LIGHTS} lights",
+                r.cost()
+            );
+        }
+    }
+}
+
+/// Lights along a logarithmic spiral in a plane, shaded at its pole: the
+/// lights' distances span many decades, and nodes near the pole hold it.
+#[test]
+fn a_point_at_the_pole_of_a_logarithmic_spiral_costs_about_the_exact_sum() {
+    const LIGHTS: usize = 100_000;
+    let lights: Vec<PointLight> = (0..LIGHTS)
+        .map(|i| {
+            let theta = i as f32 * 0.01;
+            let r = 1e-3 * (0.012 * theta).exp();
+            PointLight::new(
+                Vec3::new(r * theta.cos(), r * theta.sin(), 0.01 * r),
+                Vec3::ONE,
+            )
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::ONE));
+    for normal in [Vec3::Z, Vec3::new(0.2, 0.1, 1.0).normalize()] {
+        let exact = s.exact(Vec3::ZERO, normal).unwrap();
+        let r = s
+            .shade(Vec3::ZERO, normal, Threshold::relative(0.01))
+            .unwrap();
+        assert!(r.certifies(exact), "{r:?}");
+        assert!(
+            at_most_about_all_lights(&r, LIGHTS),
+            "{} evaluations for {LIGHTS} lights",
+            r.cost()
+        );
+    }
+}
+
+/// Lights within `1e-6` of the ground, points on the ground: every shared
+/// node straddles every point's tangent plane. The batch call costs about
+/// what its points cost shaded one by one: a group whose shared cut does
+/// not pay is shaded point by point.
+#[test]
+fn a_batch_among_lights_in_its_tangent_plane_costs_about_its_points_alone() {
+    const LIGHTS: usize = 100_000;
+    let mut u = uniforms(7);
+    let lights: Vec<PointLight> = (0..LIGHTS)
+        .map(|_| {
+            let (x, y) = ((u() - 0.5) * 200.0, (u() - 0.5) * 200.0);
+            PointLight::new(Vec3::new(x, y, (u() - 0.5) * 2e-6), Vec3::ONE)
+        })
+        .collect();
+    let tree = LightTree::build(&lights).unwrap();
+    let mut s = tree.shading(Lambert::new(Vec3::ONE));
+    let queries: Vec<_> = (0..256)
+        .map(|i| {
+            let (x, y) = ((i % 16) as f32 * 0.25, (i / 16) as f32 * 0.25);
+            manylights::Query::new(Vec3::new(x, y, 0.0), Vec3::Z).unwrap()
+        })
+        .collect();
+    let threshold = Threshold::relative(0.01);
+    let mut results = vec![manylights::ShadeResult::default(); queries.len()];
+    let stats = s
+        .shade_batch(&queries, threshold, manylights::Unoccluded, &mut results)
+        .unwrap();
+    let batch: u64 =
+        results.iter().map(|r| u64::from(r.cost())).sum::<u64>() + stats.shared_evaluations;
+    let mut alone = 0u64;
+    for (q, r) in queries.iter().zip(&results) {
+        let exact = s.exact_query(q, manylights::Unoccluded);
+        assert!(r.certifies(exact), "{r:?}");
+        let own = s.shade_query(q, threshold, manylights::Unoccluded).unwrap();
+        assert!(own.certifies(exact), "{own:?}");
+        assert!(at_most_about_all_lights(&own, LIGHTS), "{own:?}");
+        alone += u64::from(own.cost());
+    }
+    assert!(
+        batch <= alone + alone / 4 + 4096,
+        "the batch took {batch} evaluations, its points alone {alone} ({stats:?})"
+    );
+}
