@@ -101,6 +101,20 @@ impl ErrorStats {
     }
 }
 
+/// Largest relative difference of `values` from `exact` over the pixels
+/// whose exact value is positive, measured as [`ErrorStats::max_relative`]
+/// (largest channel over largest channel); NaN if a difference is NaN.
+pub fn max_relative(values: &[Option<DVec3>], exact: &[Option<DVec3>]) -> f64 {
+    values
+        .iter()
+        .zip(exact)
+        .filter_map(|(v, e)| Some(((*v)?, (*e)?)))
+        .filter(|(_, e)| e.max_element() > 0.0)
+        .map(|(v, e)| (v - e).abs().max_element() / e.max_element())
+        // A NaN anywhere makes the result NaN (f64::max would skip it).
+        .fold(0.0, |a: f64, d| if d.is_nan() || d > a { d } else { a })
+}
+
 /// Mean of `f` over the shaded (non-sky) pixels.
 pub fn mean_per_pixel(tree: &[Option<ShadeResult>], f: impl Fn(&ShadeResult) -> u32) -> f64 {
     let (sum, count) = tree
@@ -119,19 +133,37 @@ pub fn print_row(label: &str, value: impl std::fmt::Display) {
 /// speed-up, the errors made against the exact sum, the certified bound, the
 /// work per pixel, and the pixels breaking the bound (there should be none).
 pub fn print_comparison(
-    build: std::time::Duration,
-    tree: std::time::Duration,
-    exact: std::time::Duration,
+    build: Duration,
+    tree: Duration,
+    exact: Duration,
     results: &[Option<ShadeResult>],
     stats: &ErrorStats,
 ) {
+    print_times(build, tree, &[("exact render", "speed-up", exact)]);
+    print_errors(results, stats);
+}
+
+/// Prints the build and render times, then for each reference `(render
+/// label, speed-up label, time)` its render time and the tree's speed-up
+/// over it.
+pub fn print_times(build: Duration, tree: Duration, references: &[(&str, &str, Duration)]) {
     print_row("tree build", format!("{:.3} s", build.as_secs_f64()));
     print_row("tree render", format!("{:.3} s", tree.as_secs_f64()));
-    print_row("exact render", format!("{:.3} s", exact.as_secs_f64()));
-    print_row(
-        "speed-up",
-        format!("{:.2}x", exact.as_secs_f64() / tree.as_secs_f64()),
-    );
+    for (label, _, time) in references {
+        print_row(label, format!("{:.3} s", time.as_secs_f64()));
+    }
+    for (_, label, time) in references {
+        print_row(
+            label,
+            format!("{:.2}x", time.as_secs_f64() / tree.as_secs_f64()),
+        );
+    }
+}
+
+/// Prints the errors made against the exact sum, the certified bound, the
+/// work per pixel, and the pixels breaking the bound (there should be
+/// none).
+pub fn print_errors(results: &[Option<ShadeResult>], stats: &ErrorStats) {
     // Measured as the threshold measures the bound (largest channel over
     // largest channel), then each channel against itself.
     print_row(

@@ -20,8 +20,9 @@
 //!   ground scene's evaluations-per-point table ([`evaluations`]), the
 //!   Lambert bounds on the coloured street city ([`bounds`]), batch
 //!   shading of a camera view ([`batch`]), where a certified cut's work
-//!   goes ([`anatomy`]) and light sampling for path tracers
-//!   ([`light_sampling`]).
+//!   goes ([`anatomy`]), light sampling for path tracers
+//!   ([`light_sampling`]) and the cut's cost on points among the street
+//!   city's lamps ([`roofs`]).
 
 pub mod anatomy;
 pub mod batch;
@@ -44,6 +45,7 @@ pub mod occluded;
 pub mod options;
 pub mod plot;
 pub mod raycast;
+pub mod roofs;
 pub mod sampling;
 pub mod scaling;
 pub mod scenes;

@@ -13,6 +13,7 @@
 //! cargo run --release -p manylights-report -- sampling        # light sampling for path tracers
 //! cargo run --release -p manylights-report -- stochastic-batch # the stochastic cut over an image
 //! cargo run --release -p manylights-report -- emitters        # spot lights and virtual point lights
+//! cargo run --release -p manylights-report -- roofs           # roof points among the lamps
 //! ```
 //!
 //! The full report takes about a minute on 2 cores, plus about two minutes
@@ -39,12 +40,15 @@
 //! against power sampling, pbrt-v4's and Cycles' importances on the same
 //! tree, and the stochastic cut; a few minutes), `stochastic-batch` (the
 //! stochastic cut over the batch part's camera view, pixel by pixel against
-//! the batch call sharing its cut, [`manylights_report::stochastic_batch`])
-//! and `emitters` (spot
-//! lights on the street city and instant radiosity's virtual point lights
-//! in a room, per point and per pixel, [`manylights_report::emitters`]).
-//! `--shadow-lights N` sets the occluded city's number of lights (20,000). Writes to `out/report/` under the
-//! repository root:
+//! the batch call sharing its cut, [`manylights_report::stochastic_batch`]),
+//! `emitters` (spot lights on the street city and instant radiosity's
+//! virtual point lights in a room, per point and per pixel,
+//! [`manylights_report::emitters`]) and `roofs` (the certified cut on the street city's ground, façades and
+//! roofs inside the lamps' layer, 10^5 and 10^6 lights, one core, against
+//! the vectorized exact sum, [`manylights_report::roofs`]; under a minute).
+//! `--shadow-lights N` sets the occluded city's number of lights (20,000);
+//! `--roof-lights N` (repeatable) the roofs part's (10^5 and 10^6). Writes
+//! to `out/report/` under the repository root:
 //!
 //! * `errors.csv`, one row per scene and configuration (in occluded scenes
 //!   with the mean shadow rays and node classifications per point), and
@@ -83,6 +87,7 @@ use manylights_report::measure::MAX_PASSES;
 use manylights_report::mesh_city::{CITY_MESH, run_city_mesh};
 use manylights_report::occluded::run_occluded;
 use manylights_report::plot::{plot_scaling, plot_scene};
+use manylights_report::roofs::{QUICK_SIZES, ROOFS, SIZES as ROOF_SIZES, run_roofs};
 use manylights_report::scaling::run_scaling;
 use manylights_report::scenes::{canopy, city_shadows};
 use manylights_report::stochastic_batch::{STOCHASTIC_BATCH, run_stochastic_batch};
@@ -103,6 +108,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let started = Instant::now();
     let mut quick = false;
     let mut shadow_lights = None;
+    let mut roof_lights = Vec::new();
     let mut parts = Vec::new();
     let mut args = std::env::args().skip(1);
     while let Some(arg) = args.next() {
@@ -111,6 +117,10 @@ fn main() -> Result<(), Box<dyn Error>> {
             "--shadow-lights" => {
                 let n = args.next().and_then(|n| n.parse().ok());
                 shadow_lights = Some(n.ok_or("--shadow-lights needs a number of lights")?);
+            }
+            "--roof-lights" => {
+                let n = args.next().and_then(|n| n.parse().ok());
+                roof_lights.push(n.ok_or("--roof-lights needs a number of lights")?);
             }
             SHADOWS => {
                 parts.extend(OCCLUDED_NAMES.map(String::from));
@@ -129,6 +139,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                     SAMPLING,
                     STOCHASTIC_BATCH,
                     EMITTERS,
+                    ROOFS,
                 ]
                 .contains(&name) =>
             {
@@ -137,8 +148,9 @@ fn main() -> Result<(), Box<dyn Error>> {
             _ => {
                 return Err(format!(
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
-                     [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | {CITY_MESH} | {SHADOWS} | \
-                     {SCALING} | {ANATOMY} | {GGX} | {SAMPLING} | {STOCHASTIC_BATCH} | {EMITTERS}]...",
+                     [--roof-lights N]... [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | \
+                     {CITY_MESH} | {SHADOWS} | {SCALING} | {ANATOMY} | {GGX} | {SAMPLING} | \
+                     {STOCHASTIC_BATCH} | {EMITTERS} | {ROOFS}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -184,10 +196,18 @@ fn main() -> Result<(), Box<dyn Error>> {
     if named(EMITTERS) {
         run_emitters(quick)?;
     }
+    if named(ROOFS) {
+        let sizes: &[usize] = match (roof_lights.is_empty(), quick) {
+            (false, _) => &roof_lights,
+            (true, true) => &QUICK_SIZES,
+            (true, false) => &ROOF_SIZES,
+        };
+        run_roofs(sizes, quick)?;
+    }
     if !parts.is_empty()
-        && parts
-            .iter()
-            .all(|p| [ANATOMY, GGX, SAMPLING, STOCHASTIC_BATCH, EMITTERS].contains(&p.as_str()))
+        && parts.iter().all(|p| {
+            [ANATOMY, GGX, SAMPLING, STOCHASTIC_BATCH, EMITTERS, ROOFS].contains(&p.as_str())
+        })
     {
         return Ok(());
     }
