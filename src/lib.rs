@@ -180,23 +180,6 @@
 //! emission profiles and takes none of their paths; a [`Shading`] session
 //! reuses its scratch, so shading allocates nothing once warmed.
 //!
-//! A point never costs much more than the exact sum of its lights. Where
-//! the bounds cannot settle nodes early (every node straddling a tangent
-//! plane that runs through a thin layer of lights, lights clustered around
-//! the point at every scale), a cut would walk down to the leaves and bound
-//! every node on the way. Instead, once a point's cut has spent `N / 8`
-//! light evaluations and 4,096 more (`N` the tree's lights, each node
-//! bounded counting as 8), it stops refining and sums the lights of every
-//! node still waiting: in `f32` lanes where the threshold allows coarse
-//! sums, certified by their rounding bound, else in `f64`. A point then
-//! takes at most `N + N / 64 + 512` evaluations as [`ShadeResult::cost`]
-//! counts them, of which at most `N / 64 + 512` node bounds. Cuts that
-//! interpolate across levels (whose blend needs the bounded nodes) and cuts
-//! under a budget are not finished so. In the batch call, a group whose
-//! shared cut costs more than a share of what its points cost alone stops
-//! and shades them one by one ([`Shading::shade_batch`]), so the call costs
-//! about what its points cost alone at most.
-//!
 //! Emitters cost more per evaluation than isotropic lights: their lights
 //! are summed in `f64` with each profile's value (the `f32` light sums and
 //! children's bounds are for isotropic lights), each node bound adds its

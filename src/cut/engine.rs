@@ -93,14 +93,6 @@ pub(crate) trait Region<S: Shader>: Sized {
     /// The entry of slot `slot` was taken from the list.
     fn taken<V: Visibility>(cut: &mut Cut<'_, S, V, Self>, slot: u32);
 
-    /// Whether the cut stops refining and sums the lights of every entry
-    /// still waiting instead, because what it has spent so far passed what
-    /// a point may spend before the exact sum is the cheaper way to finish
-    /// (see [`FINISH_SHARE_DIVISOR`](super::policy::FINISH_SHARE_DIVISOR)).
-    /// Asked before each refinement; never true for a cut that
-    /// interpolates (whose blend reads the list).
-    fn finishes_exactly<V: Visibility>(cut: &Cut<'_, S, V, Self>) -> bool;
-
     /// Whether the whole scene is summed now, its root known visible and
     /// taken by the list (a small scene, where summing costs less than
     /// cutting); `nested` when the cut interpolates.
@@ -336,13 +328,6 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
                 R::lights(self, 0, node.lights(), Seen::Visible, 1.0);
                 continue;
             }
-            if refining && R::finishes_exactly(self) {
-                // The cut has spent what the point may spend before summing
-                // its lights costs less: every entry waiting is summed light
-                // by light, and the result is exact up to the sums' rounding.
-                self.finish_exactly(list);
-                break;
-            }
             if refining && !R::affordable(self, list, node, top.seen == Seen::Visible) {
                 outcome.stop = Stop::Budget;
                 break;
@@ -369,21 +354,6 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
             }
         }
         outcome
-    }
-
-    /// Takes every entry waiting in the list and sums its lights, those of
-    /// entries known visible together, the others asked of the host light
-    /// by light: what the cut leaves is then its settled sum alone, exact
-    /// up to the sums' certified rounding. Not for a cut that interpolates
-    /// (whose blend reads the list).
-    #[inline(never)]
-    fn finish_exactly(&mut self, list: &mut ErrorList) {
-        while let Some((entry, slot)) = list.pop_slot() {
-            R::taken(self, slot);
-            let known = entry.seen == Seen::Visible || V::ALWAYS_VISIBLE;
-            let node = &self.tree.nodes[entry.node as usize];
-            R::lights(self, entry.node as usize, node.lights(), seen(known), 1.0);
-        }
     }
 
     /// Refines `top`, just taken from slot `slot` of the list: its

@@ -521,13 +521,6 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
         }
     }
 
-    /// Never: a group's shared cut that does not pay stops at its budget,
-    /// and its points are shaded alone.
-    #[inline(always)]
-    fn finishes_exactly<V: Visibility>(_: &Cut<'_, S, V, Self>) -> bool {
-        false
-    }
-
     #[inline(always)]
     fn sums_whole_scene<V: Visibility>(_: &Cut<'_, S, V, Self>, _: bool) -> bool {
         false

@@ -10,9 +10,8 @@ use super::engine::{Cut, Outcome, Pending, Region, seen};
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::interpolate::{self, Item, NO_PARENT, Nesting};
 use super::policy::{
-    COARSE_NODES_MAX, COARSE_SHARE_DIVISOR, COARSE_TARGET_MIN, EXACT_NODE_LIGHTS, FINISH_ALLOWANCE,
-    FINISH_NODE_WEIGHT, FINISH_SHARE_DIVISOR, NEAR_NODE_LIGHTS, SMALL_SCENE_LIGHTS,
-    SMALL_SCENE_LIGHTS_COARSE, is_near,
+    COARSE_NODES_MAX, COARSE_SHARE_DIVISOR, COARSE_TARGET_MIN, EXACT_NODE_LIGHTS, NEAR_NODE_LIGHTS,
+    SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE, is_near,
 };
 use super::result::{ShadeResult, Stop};
 use super::threshold::{Target, Threshold};
@@ -43,10 +42,6 @@ pub(crate) struct Point<'a, S: Shader> {
     /// sum (a target of 0, see [`Threshold::zero`]) rather than a few at a
     /// time.
     pub(crate) one_by_one: bool,
-    /// What the cut may spend before it finishes as the exact sum of its
-    /// lights, in light evaluations (see [`FINISH_SHARE_DIVISOR`]):
-    /// `u64::MAX` (never) with interpolation or a budget.
-    finish_after: u64,
     /// The share of a coarse sum its error may be for the sum to be kept
     /// (`1/32` of a relative target), or `None` where coarse sums are not
     /// used; where they are, children are bounded coarsely too.
@@ -184,7 +179,6 @@ impl<'a, S: Shader> Point<'a, S> {
                 NEAR_NODE_LIGHTS
             },
             one_by_one: threshold.is_zero(),
-            finish_after: u64::MAX,
             coarse: coarse_share(threshold),
             small_lanes,
             settled: CompensatedSum::default(),
@@ -436,16 +430,6 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
             node.child_count
         };
         cut.work.cost().saturating_add(cost) <= cut.budget
-    }
-
-    /// Once the lights evaluated plus [`FINISH_NODE_WEIGHT`] per node
-    /// bounded pass `N /` [`FINISH_SHARE_DIVISOR`]` + `[`FINISH_ALLOWANCE`],
-    /// `N` the tree's lights (never with interpolation, nor under a budget,
-    /// which the sums could overrun).
-    #[inline(always)]
-    fn finishes_exactly<V: Visibility>(cut: &Cut<'_, S, V, Self>) -> bool {
-        u64::from(cut.work.lights) + FINISH_NODE_WEIGHT * u64::from(cut.work.nodes)
-            > cut.region.finish_after
     }
 
     #[inline(always)]
@@ -738,13 +722,6 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
     );
     let mut cut = Cut::new(tree, shader, region, threshold, visibility);
     let interpolating = threshold.interpolation().is_some();
-    if !interpolating
-        && threshold.budget().is_none()
-        && let Some(root) = tree.nodes.first()
-    {
-        cut.region.finish_after =
-            u64::from(root.light_count) / FINISH_SHARE_DIVISOR + FINISH_ALLOWANCE;
-    }
     let (list, nesting) = (&mut scratch.list, &mut scratch.nesting);
     nesting.point = cut.region.surface.point;
     cut.enter_root(list, interpolating.then_some(&mut *nesting));

@@ -60,33 +60,6 @@ pub(crate) const COARSE_TARGET_MIN: f64 = 1.0 / 4096.0;
 /// sum to be kept, as a divisor of the relative target: `1/32`.
 pub(crate) const COARSE_SHARE_DIVISOR: f64 = 32.0;
 
-/// A shading point's cut finishes as the exact sum of its lights once what
-/// it has spent passes `N / FINISH_SHARE_DIVISOR +` [`FINISH_ALLOWANCE`],
-/// `N` the tree's lights, counting each light evaluated as 1 and each node
-/// bounded as [`FINISH_NODE_WEIGHT`]: the entries still waiting are summed
-/// light by light (without interpolation across levels, nor under a
-/// budget). Summing the rest costs at most `N` light evaluations, so a
-/// point never costs much more than the exact sum of its lights: at most
-/// `N (1 + 1/8) + 4096` light evaluations' worth, and at most `N (1 +
-/// 1/64) + 512` evaluations as [`ShadeResult::cost`](crate::ShadeResult::cost)
-/// counts them. Where the bounds are tight (about a thousand evaluations a
-/// point at `10^5` lights and more), no cut comes near it; it catches the
-/// scenes where every node straddles something the bounds cannot settle
-/// early (lights clustered at the point, tangent planes through thin
-/// layers of lights).
-pub(crate) const FINISH_SHARE_DIVISOR: u64 = 8;
-
-/// See [`FINISH_SHARE_DIVISOR`]: what a cut may spend on any scene before
-/// it finishes exactly, in light evaluations. Cuts of `10^4` lights spend
-/// about 3,000 at a relative 1%, a tenth of a small scene's exact sum: the
-/// allowance keeps them cutting.
-pub(crate) const FINISH_ALLOWANCE: u64 = 4096;
-
-/// See [`FINISH_SHARE_DIVISOR`]: a node bound costs about as much as
-/// summing this many lights (from `f32` lanes, measured by instruction
-/// counts; `docs/tuning.md`).
-pub(crate) const FINISH_NODE_WEIGHT: u64 = 8;
-
 /// Node evaluations after which a cut bounds children in `f64` only. The
 /// single-precision bounds carry a rounding allowance of a few dozen `f32`
 /// ulps of `I kd / D^2`, while a node seen at a grazing angle (the lights

@@ -219,18 +219,11 @@ fn a_point_far_beyond_the_edge_of_a_city_sees_it_at_a_grazing_angle() {
     }
 }
 
-/// The cost cap of a point's cut: it finishes as the exact sum of its
-/// lights once it has spent a share of `N` (a node bound counting as eight
-/// lights), so it never takes much more than `N` evaluations, and bounds at
-/// most `N / 64` nodes and a constant (a walk down to the leaves bounds
-/// about `N / 16`).
-fn at_most_about_all_lights(r: &manylights::ShadeResult, lights: usize) -> bool {
-    eprintln!(
-        "{} nodes, {} lights for {lights} lights",
-        r.nodes_evaluated, r.lights_evaluated
-    );
-    r.cost() as usize <= lights + lights / 64 + 512
-        && r.nodes_evaluated as usize <= lights / 64 + 512
+/// Where the bounds settle nothing early, a point's cut walks down to the
+/// leaves: every light evaluated once and the nodes above them bounded once
+/// (about `N / 14` with the default leaves), never more.
+fn at_most_a_walk_to_the_leaves(r: &manylights::ShadeResult, lights: usize) -> bool {
+    r.lights_evaluated as usize <= lights && r.nodes_evaluated as usize <= lights / 8 + 512
 }
 
 /// Deterministic uniform numbers in `[0, 1)` (a 64-bit LCG's high bits).
@@ -251,7 +244,7 @@ fn uniforms(seed: u64) -> impl FnMut() -> f32 {
 /// the normal exactly the plane's, every light lies in the tangent plane
 /// and the whole scene is exactly 0.
 #[test]
-fn a_normal_slightly_off_a_plane_of_lights_costs_about_the_exact_sum() {
+fn a_normal_slightly_off_a_plane_of_lights_costs_at_most_a_walk_to_the_leaves() {
     const LIGHTS: usize = 100_000;
     let mut u = uniforms(57);
     let lights: Vec<PointLight> = (0..LIGHTS)
@@ -274,7 +267,7 @@ fn a_normal_slightly_off_a_plane_of_lights_costs_about_the_exact_sum() {
             "e = {e}: {r:?} against {exact}"
         );
         assert!(
-            at_most_about_all_lights(&r, LIGHTS),
+            at_most_a_walk_to_the_leaves(&r, LIGHTS),
             "e = {e}: {} evaluations for {LIGHTS} lights",
             r.cost()
         );
@@ -289,7 +282,7 @@ fn a_normal_slightly_off_a_plane_of_lights_costs_about_the_exact_sum() {
 /// at the cluster's centre: every node's ball holds the point or nearly,
 /// at every scale.
 #[test]
-fn a_point_at_the_centre_of_a_geometric_cluster_costs_about_the_exact_sum() {
+fn a_point_at_the_centre_of_a_geometric_cluster_costs_at_most_a_walk_to_the_leaves() {
     const LIGHTS: usize = 100_000;
     let mut u = uniforms(1998);
     let centre = Vec3::new(3.0, -2.0, 1.0);
@@ -308,7 +301,7 @@ fn a_point_at_the_centre_of_a_geometric_cluster_costs_about_the_exact_sum() {
             let r = s.shade(centre, normal, Threshold::relative(t)).unwrap();
             assert!(r.certifies(exact), "{r:?}");
             assert!(
-                at_most_about_all_lights(&r, LIGHTS),
+                at_most_a_walk_to_the_leaves(&r, LIGHTS),
                 "at {t}: {} evaluations for {LIGHTS} lights",
                 r.cost()
             );
@@ -319,7 +312,7 @@ fn a_point_at_the_centre_of_a_geometric_cluster_costs_about_the_exact_sum() {
 /// Lights along a logarithmic spiral in a plane, shaded at its pole: the
 /// lights' distances span many decades, and nodes near the pole hold it.
 #[test]
-fn a_point_at_the_pole_of_a_logarithmic_spiral_costs_about_the_exact_sum() {
+fn a_point_at_the_pole_of_a_logarithmic_spiral_costs_at_most_a_walk_to_the_leaves() {
     const LIGHTS: usize = 100_000;
     let lights: Vec<PointLight> = (0..LIGHTS)
         .map(|i| {
@@ -340,7 +333,7 @@ fn a_point_at_the_pole_of_a_logarithmic_spiral_costs_about_the_exact_sum() {
             .unwrap();
         assert!(r.certifies(exact), "{r:?}");
         assert!(
-            at_most_about_all_lights(&r, LIGHTS),
+            at_most_a_walk_to_the_leaves(&r, LIGHTS),
             "{} evaluations for {LIGHTS} lights",
             r.cost()
         );
@@ -382,7 +375,7 @@ fn a_batch_among_lights_in_its_tangent_plane_costs_about_its_points_alone() {
         assert!(r.certifies(exact), "{r:?}");
         let own = s.shade_query(q, threshold, manylights::Unoccluded).unwrap();
         assert!(own.certifies(exact), "{own:?}");
-        assert!(at_most_about_all_lights(&own, LIGHTS), "{own:?}");
+        assert!(at_most_a_walk_to_the_leaves(&own, LIGHTS), "{own:?}");
         alone += u64::from(own.cost());
     }
     assert!(
