@@ -45,6 +45,16 @@ pub enum MeshError {
         /// The box, counted from 0 over all boxes added in one call.
         index: usize,
     },
+    /// A mesh given as a solid is not closed: some edges (over vertices
+    /// identified by position) are traversed more often in one direction
+    /// than in the other, so it encloses no region.
+    #[error("mesh {mesh} is not closed: {open_edges} edges lack their reverse")]
+    NotClosed {
+        /// The mesh.
+        mesh: usize,
+        /// Edges without a balancing reverse.
+        open_edges: usize,
+    },
     /// A negative or non-finite self-intersection offset.
     #[error("offset {0} is not a finite non-negative distance")]
     BadOffset(f32),

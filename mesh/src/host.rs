@@ -9,10 +9,13 @@ use crate::occluders::{BLOCKER_REACH, MARGIN_ULPS, NO_PARTNER, Occluders, Prim};
 use crate::shaft::Shaft;
 use crate::triangle::{blocks, clears};
 
-/// Occluders tried as the single blocker of a node: the first few that the
-/// shadow ray between the centres of the apex's box and the node's box
-/// hits (one that does not cannot block every segment), in the BVH's
-/// traversal order, a quad counted once. A blocker of a whole node is
+/// Occluders tried as the single blocker of a node: the first few triangles
+/// (a quad counted once), and the first few boxes, that the shadow ray
+/// between the centres of the apex's box and the node's box hits (one that
+/// does not cannot block every segment), in the BVH's traversal order. The
+/// boxes are counted apart so that the walls a ray crosses into a solid do
+/// not use up the tries before the box inside it
+/// ([`OccludersBuilder::solid`](crate::OccludersBuilder::solid)). A blocker of a whole node is
 /// nearly always among them, and a long segment through foliage meets many
 /// occluders that cannot be one.
 pub const BLOCKER_CANDIDATES: usize = 4;
@@ -62,7 +65,7 @@ pub const BATCH_CANDIDATES_MAX: usize = 64;
 ///   or a quad of two, whose predicates clear their slack at every pair of
 ///   corners (see `triangle`'s rounding note in the crate documentation),
 ///   crossed at least the offset from the apex. Only the first
-///   [`BLOCKER_CANDIDATES`] occluders that the shadow ray between the two
+///   [`BLOCKER_CANDIDATES`] triangles and boxes that the shadow ray between the two
 ///   boxes' centres hits are tried.
 /// * [`Coverage::Partial`] when a shadow ray between the two centres is
 ///   blocked.
@@ -176,6 +179,11 @@ impl<'o> Shadows<'o> {
                 candidates.len() > BATCH_CANDIDATES_MAX
             },
         );
+        // Boxes first: a ray through a solid meets the box inside it, which
+        // answers with one slab test.
+        let occ = self.occluders;
+        self.candidates
+            .sort_unstable_by_key(|&slot| !matches!(occ.prims[slot as usize], Prim::Box));
         !crowded
     }
 
@@ -219,7 +227,7 @@ impl<'o> Shadows<'o> {
         }
     }
 
-    /// Whether one of the first [`BLOCKER_CANDIDATES`] occluders along the
+    /// Whether one of the first [`BLOCKER_CANDIDATES`] triangles or boxes along the
     /// segment from `centre` to `middle` blocks every segment from `from`
     /// to `target`, and whether the shadow ray from `centre` to `middle` is
     /// blocked.
@@ -245,59 +253,67 @@ impl<'o> Shadows<'o> {
         // documentation); and never a node the apex's box touches.
         let within = magnitude <= BLOCKER_REACH * occ.scale;
         let m = 2.0 * f64::from(magnitude);
-        let (mut tried, mut occluded, mut centre_blocked) = (0, false, false);
+        let (mut tried, mut boxes_tried, mut occluded, mut centre_blocked) = (0, 0, false, false);
         let mut last = NO_PARTNER;
+        // Triangles (or quads) to try once the traversal is over: a box is
+        // tried at once (its test is cheap, and in a solid it is the
+        // likely blocker), a triangle's test only if no box blocks.
+        let mut triangles = [0u32; BLOCKER_CANDIDATES];
         occ.bvh.any_along(&between, |slot| {
-            let b = &occ.bounds[slot];
             // An occluder that blocks every segment blocks the one between
             // the centres: only those are tried, and a quad once.
             if !occ.hits(slot, &between, centre, middle, t_min) {
                 return false;
             }
             centre_blocked = true;
-            if let Prim::Triangle { partner, .. } = occ.prims[slot]
-                && partner == last
-                && partner != NO_PARTNER
-            {
-                return false;
-            }
-            last = slot as u32;
-            tried += 1;
-            occluded = match occ.prims[slot] {
-                Prim::Box => box_blocks(b, from, target, margin, occ.offset),
-                Prim::Triangle { v, partner, shared } => {
-                    within
-                        && gap > 0.0
-                        && if partner == NO_PARTNER {
-                            blocks(
-                                &[v],
-                                &[[true; 3]],
-                                from,
-                                target,
-                                f64::from(occ.offset) / gap,
-                                m,
-                            )
-                        } else {
-                            let Prim::Triangle {
-                                v: w,
-                                shared: other,
-                                ..
-                            } = occ.prims[partner as usize]
-                            else {
-                                unreachable!("a partner is a triangle")
-                            };
-                            blocks(
-                                &[v, w],
-                                &[shared.map(|s| !s), other.map(|s| !s)],
-                                from,
-                                target,
-                                f64::from(occ.offset) / gap,
-                                m,
-                            )
-                        }
+            match occ.prims[slot] {
+                Prim::Box => {
+                    boxes_tried += 1;
+                    occluded = box_blocks(&occ.bounds[slot], from, target, margin, occ.offset);
                 }
+                Prim::Triangle { partner, .. } => {
+                    if partner == last && partner != NO_PARTNER {
+                        return false;
+                    }
+                    last = slot as u32;
+                    if tried < BLOCKER_CANDIDATES {
+                        triangles[tried] = slot as u32;
+                        tried += 1;
+                    }
+                }
+            }
+            occluded
+                || (tried == BLOCKER_CANDIDATES
+                    && (boxes_tried >= BLOCKER_CANDIDATES || occ.boxes() == 0))
+        });
+        if occluded || !(within && gap > 0.0) {
+            return (occluded, centre_blocked);
+        }
+        let t_min_bound = f64::from(occ.offset) / gap;
+        occluded = triangles[..tried].iter().any(|&slot| {
+            let Prim::Triangle { v, partner, shared } = occ.prims[slot as usize] else {
+                unreachable!("only triangles are kept")
             };
-            occluded || tried == BLOCKER_CANDIDATES
+            if partner == NO_PARTNER {
+                blocks(&[v], &[[true; 3]], from, target, t_min_bound, m)
+            } else {
+                let Prim::Triangle {
+                    v: w,
+                    shared: other,
+                    ..
+                } = occ.prims[partner as usize]
+                else {
+                    unreachable!("a partner is a triangle")
+                };
+                blocks(
+                    &[v, w],
+                    &[shared.map(|s| !s), other.map(|s| !s)],
+                    from,
+                    target,
+                    t_min_bound,
+                    m,
+                )
+            }
         });
         (occluded, centre_blocked)
     }

@@ -90,6 +90,7 @@ mod error;
 mod host;
 mod occluders;
 pub mod shaft;
+mod solid;
 mod triangle;
 
 pub use bvh::corners;
@@ -100,4 +101,5 @@ pub use occluders::{
     BLOCKER_REACH, DEFAULT_OFFSET_SCALE, MARGIN_ULPS, Occluders, OccludersBuilder,
     QUAD_COPLANAR_COS, RAY_BOX_ULPS, box_mesh,
 };
+pub use solid::{BOXES_PER_PART, GRID_CELLS};
 pub use triangle::PREDICATE_SLACK;

@@ -10,6 +10,7 @@ use obvhs::aabb::Aabb as BvhAabb;
 use crate::bvh::{Bvh, Segment, to_bvh};
 use crate::error::MeshError;
 use crate::host::Shadows;
+use crate::solid::{interior_boxes, open_edges};
 use crate::triangle::crosses;
 
 /// Triangles' boxes, as the BVH and the shafts see them, are grown by this
@@ -117,6 +118,7 @@ pub struct Occluders {
     pub(crate) offset: f32,
     triangles: usize,
     boxes: usize,
+    solid_boxes: Vec<Aabb>,
     degenerate: usize,
     quads: usize,
 }
@@ -126,6 +128,8 @@ pub struct Occluders {
 pub struct OccludersBuilder {
     triangles: Vec<[Vec3; 3]>,
     boxes: Vec<Aabb>,
+    /// The triangles of the solids, degenerate ones included.
+    solids: Vec<[Vec3; 3]>,
     meshes: usize,
     offset: Option<f32>,
     degenerate: usize,
@@ -165,6 +169,47 @@ impl OccludersBuilder {
             self.push_triangle(v);
         }
         Ok(self)
+    }
+
+    /// Adds a *solid*: a closed indexed triangle mesh whose enclosed region
+    /// is opaque, such as a building, a rock or a statue. Its triangles are
+    /// added as [`mesh`](Self::mesh) adds them, and [`build`](Self::build)
+    /// adds boxes found inside the enclosed region as box occluders (see
+    /// [`Occluders::solid_boxes`]): the classifier can then prove that the
+    /// solid hides a node as a whole, which no single triangle of it shows.
+    ///
+    /// Closed means that every edge, over vertices identified by position
+    /// (so that a mesh split at its creases still counts), is traversed as
+    /// often in each direction; the enclosed region is where the surface's
+    /// winding number is not zero, whichever way it is wound. The boxes lie
+    /// inside that region, at least the *inset* `2 offset + 2 m` from the
+    /// surface (`m` the classifier's margin at the occluders' scale,
+    /// [`MARGIN_ULPS`]` f32::EPSILON`[`scale`](Occluders::scale)), so that a
+    /// point on the surface sees past them what it sees past the surface.
+    ///
+    /// The boxes join the model: a shadow ray that meets one is blocked.
+    /// For a segment from outside the solid this changes nothing, as it
+    /// crosses the surface on its way in; a shading point inside the solid
+    /// (a room modelled as a closed box, seen from within) should be given
+    /// as a [`mesh`](Self::mesh) instead.
+    ///
+    /// Errors as [`mesh`](Self::mesh) does, and with
+    /// [`MeshError::NotClosed`] on a mesh that is not closed.
+    pub fn solid(self, positions: &[Vec3], indices: &[u32]) -> Result<Self, MeshError> {
+        let mut builder = self.mesh(positions, indices)?;
+        let triangles: Vec<[Vec3; 3]> = indices
+            .chunks_exact(3)
+            .map(|t| [0, 1, 2].map(|k| positions[t[k] as usize]))
+            .collect();
+        let open_edges = open_edges(&triangles);
+        if open_edges > 0 {
+            return Err(MeshError::NotClosed {
+                mesh: builder.meshes - 1,
+                open_edges,
+            });
+        }
+        builder.solids.extend(triangles);
+        Ok(builder)
     }
 
     /// Adds triangles given by their corners (a triangle soup): errors on a
@@ -230,13 +275,21 @@ impl OccludersBuilder {
 
     /// The occluders in their BVH. An empty set (no mesh, no box) is valid:
     /// its hosts see everything.
-    pub fn build(self) -> Occluders {
+    pub fn build(mut self) -> Occluders {
         let scale = self
             .triangles
             .iter()
             .flatten()
             .chain(self.boxes.iter().flat_map(|b| [&b.min, &b.max]))
             .fold(0.0f32, |m, p| m.max(p.abs().max_element()));
+        let offset = self.offset.unwrap_or(DEFAULT_OFFSET_SCALE * scale);
+        let inset = 2.0 * f64::from(offset) + 2.0 * f64::from(MARGIN_ULPS * f32::EPSILON * scale);
+        let solid_boxes = if self.solids.is_empty() {
+            Vec::new()
+        } else {
+            interior_boxes(&self.solids, inset)
+        };
+        self.boxes.extend_from_slice(&solid_boxes);
         let grow = RAY_BOX_ULPS * f32::EPSILON * scale;
         let mut bounds: Vec<BvhAabb> = self
             .triangles
@@ -283,9 +336,10 @@ impl OccludersBuilder {
             prims,
             bvh,
             scale,
-            offset: self.offset.unwrap_or(DEFAULT_OFFSET_SCALE * scale),
+            offset,
             triangles: tri_count,
             boxes: self.boxes.len(),
+            solid_boxes,
             degenerate: self.degenerate,
             quads: partners.iter().flatten().count() / 2,
         }
@@ -358,9 +412,15 @@ impl Occluders {
         self.triangles
     }
 
-    /// Box occluders.
+    /// Box occluders, those found inside solids included.
     pub fn boxes(&self) -> usize {
         self.boxes
+    }
+
+    /// The box occluders found inside solids (see
+    /// [`OccludersBuilder::solid`]).
+    pub fn solid_boxes(&self) -> &[Aabb] {
+        &self.solid_boxes
     }
 
     /// Triangles dropped for their zero area.

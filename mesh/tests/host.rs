@@ -20,6 +20,17 @@ use proptest::prelude::*;
 /// The kinds of occluder scene the tests draw from.
 fn scene(rng: &mut Rng) -> Occluders {
     let builder = Occluders::builder();
+    // Closed meshes are given as plain meshes or, half the time, as solids
+    // (with boxes found inside them).
+    let solid = rng.below(2) == 0;
+    let closed =
+        |builder: manylights_mesh::OccludersBuilder, positions: &[Vec3], indices: &[u32]| {
+            if solid {
+                builder.solid(positions, indices)
+            } else {
+                builder.mesh(positions, indices)
+            }
+        };
     let builder = match rng.below(4) {
         0 => {
             let count = 1 + rng.below(24);
@@ -30,7 +41,7 @@ fn scene(rng: &mut Rng) -> Occluders {
             for _ in 0..1 + rng.below(6) {
                 mesh.append(&box_mesh(&rng.boxed(10.0, 4.0, 0.0)));
             }
-            builder.mesh(&mesh.positions, &mesh.indices)
+            closed(builder, &mesh.positions, &mesh.indices)
         }
         2 => {
             let mut mesh = Mesh::default();
@@ -38,7 +49,7 @@ fn scene(rng: &mut Rng) -> Occluders {
                 let (centre, radius) = (rng.vec(-8.0, 8.0), rng.range(1.0, 5.0));
                 mesh.append(&sphere_mesh(centre, radius, 6, 10));
             }
-            builder.mesh(&mesh.positions, &mesh.indices)
+            closed(builder, &mesh.positions, &mesh.indices)
         }
         _ => {
             let (mesh, _) = buildings(rng, 3, 6.0);
@@ -47,7 +58,7 @@ fn scene(rng: &mut Rng) -> Occluders {
                 .iter()
                 .map(|p| *p - Vec3::new(9.0, 9.0, 0.0))
                 .collect();
-            builder.mesh(&shifted, &mesh.indices)
+            closed(builder, &shifted, &mesh.indices)
         }
     }
     .unwrap();
@@ -200,7 +211,11 @@ proptest! {
             .chunks_exact(3)
             .map(|t| [0, 1, 2].map(|k| mesh.positions[t[k] as usize]))
             .collect();
-        let occluders = Occluders::builder().triangles(&triangles).unwrap().build();
+        let occluders = if rng.below(2) == 0 {
+            Occluders::builder().triangles(&triangles).unwrap().build()
+        } else {
+            Occluders::builder().solid(&mesh.positions, &mesh.indices).unwrap().build()
+        };
         let mut host = occluders.host();
         for _ in 0..16 {
             let (point, normal) = on_surface(&mut rng, &occluders, &triangles);
@@ -559,4 +574,161 @@ fn triangles_block_whole_nodes() {
         }
     }
     assert!(answers.iter().all(|&a| a > 0), "{answers:?}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// The boxes found inside a solid lie inside it: every segment from a
+    /// point outside the solid's bounding box to a point of one of its
+    /// boxes crosses the surface (the triangles alone block it), and every
+    /// box keeps the inset from the surface.
+    #[test]
+    fn solid_boxes_lie_inside_their_solids(seed in any::<u64>()) {
+        let mut rng = Rng::new(seed);
+        let mut mesh = Mesh::default();
+        match rng.below(3) {
+            0 => {
+                for _ in 0..1 + rng.below(6) {
+                    mesh.append(&box_mesh(&rng.boxed(10.0, 4.0, 0.0)));
+                }
+            }
+            1 => {
+                for _ in 0..1 + rng.below(3) {
+                    let (centre, radius) = (rng.vec(-8.0, 8.0), rng.range(1.0, 5.0));
+                    let rings = 3 + rng.below(10) as u32;
+                    mesh.append(&sphere_mesh(centre, radius, rings, 2 * rings));
+                }
+            }
+            _ => mesh = buildings(&mut rng, 3, 6.0).0,
+        }
+        let solid = Occluders::builder().solid(&mesh.positions, &mesh.indices).unwrap().build();
+        let surface = Occluders::builder().mesh(&mesh.positions, &mesh.indices).unwrap().offset(0.0).unwrap().build();
+        prop_assert!(!solid.solid_boxes().is_empty());
+        let (lo, hi) = mesh.positions.iter().fold(
+            (Vec3::INFINITY, Vec3::NEG_INFINITY),
+            |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        );
+        for b in solid.solid_boxes() {
+            for q in box_points(&mut rng, b, 2, 16) {
+                for _ in 0..8 {
+                    // A point outside the bounding box.
+                    let dir = unit(&mut rng);
+                    let far = 0.5 * (lo + hi) + dir * (hi - lo).length() * rng.range(0.6, 2.0);
+                    prop_assert!(surface.blocked(far, q), "{} to {} in {:?}", far, q, b);
+                }
+            }
+        }
+    }
+}
+
+/// A building made of triangles has no triangle that hides a node behind
+/// it, but as a solid it does, from a point and from a group; the rays
+/// agree.
+#[test]
+fn a_solid_hides_what_its_triangles_cannot() {
+    let building = Aabb {
+        min: Vec3::new(0.0, 0.0, 0.0),
+        max: Vec3::new(10.0, 10.0, 30.0),
+    };
+    let mesh = box_mesh(&building);
+    // Behind the building's vertical edge at the origin, as seen from the
+    // point: the segments enter through two different walls.
+    let behind = Aabb {
+        min: Vec3::new(14.0, 14.0, 4.0),
+        max: Vec3::new(16.0, 16.0, 6.0),
+    };
+    let point = Vec3::new(-5.0, -5.0, 5.0);
+    let from = Aabb {
+        min: point,
+        max: point,
+    };
+    let group = Aabb {
+        min: Vec3::new(-6.0, -6.0, 4.5),
+        max: Vec3::new(-5.0, -5.0, 5.5),
+    };
+    let surface = Occluders::from_mesh(&mesh.positions, &mesh.indices).unwrap();
+    let solid = Occluders::builder()
+        .solid(&mesh.positions, &mesh.indices)
+        .unwrap()
+        .build();
+    assert_eq!(solid.solid_boxes().len(), 1);
+    assert_eq!(solid.triangles(), surface.triangles());
+    // No one wall (a quad) blocks every segment.
+    assert_eq!(
+        surface.host().classify_boxes(&from, &behind),
+        Coverage::Partial
+    );
+    assert_eq!(
+        solid.host().classify_boxes(&from, &behind),
+        Coverage::Occluded
+    );
+    assert_eq!(
+        solid.host().classify_boxes(&group, &behind),
+        Coverage::Occluded
+    );
+    let mut rng = Rng::new(7);
+    let ends = box_points(&mut rng, &behind, 3, 32);
+    let starts = box_points(&mut rng, &group, 2, 8);
+    for occluders in [&surface, &solid] {
+        assert!(agrees(
+            &mut occluders.host(),
+            &starts,
+            &ends,
+            Coverage::Occluded
+        ));
+    }
+}
+
+/// A solid must be closed: an open box is an error, and a hollow shell (an
+/// outer surface wound outwards, an inner one inwards) has no box in its
+/// cavity.
+#[test]
+fn solids_are_closed_and_keep_their_cavities() {
+    let mesh = box_mesh(&Aabb {
+        min: Vec3::ZERO,
+        max: Vec3::ONE,
+    });
+    let err = Occluders::builder()
+        .solid(&mesh.positions, &mesh.indices[..30])
+        .unwrap_err();
+    assert_eq!(
+        err,
+        MeshError::NotClosed {
+            mesh: 0,
+            open_edges: 4
+        }
+    );
+    let mut shell = box_mesh(&Aabb {
+        min: Vec3::splat(-3.0),
+        max: Vec3::splat(3.0),
+    });
+    let mut cavity = box_mesh(&Aabb {
+        min: Vec3::splat(-1.0),
+        max: Vec3::splat(1.0),
+    });
+    for t in cavity.indices.chunks_exact_mut(3) {
+        t.swap(1, 2);
+    }
+    shell.append(&cavity);
+    let occluders = Occluders::builder()
+        .solid(&shell.positions, &shell.indices)
+        .unwrap()
+        .build();
+    assert!(!occluders.solid_boxes().is_empty());
+    for b in occluders.solid_boxes() {
+        let inside_cavity = b.min.cmplt(Vec3::ONE).all() && b.max.cmpgt(Vec3::NEG_ONE).all();
+        assert!(!inside_cavity, "{b:?}");
+    }
+    // From inside the cavity, a node in it is visible.
+    let mut host = occluders.host();
+    let from = Aabb {
+        min: Vec3::splat(-0.5),
+        max: Vec3::splat(-0.5),
+    };
+    let node = Aabb {
+        min: Vec3::splat(0.2),
+        max: Vec3::splat(0.6),
+    };
+    assert_eq!(host.classify_boxes(&from, &node), Coverage::Visible);
 }

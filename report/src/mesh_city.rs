@@ -44,8 +44,9 @@ const SHOT: (Vec3, Vec3, f32) = (
 const SIZE: (u32, u32) = (96, 54);
 const QUICK_SIZE: (u32, u32) = (64, 36);
 
-/// The buildings of `city` as one triangle mesh, in the mesh host's BVH,
-/// with the box host's offset.
+/// The buildings of `city` as one closed triangle mesh, a solid (with boxes
+/// found inside each building), in the mesh host's BVH, with the box host's
+/// offset.
 pub fn building_occluders(city: &City) -> Result<Occluders, Box<dyn Error>> {
     let (mut positions, mut indices) = (Vec::new(), Vec::new());
     for b in &city.buildings {
@@ -55,7 +56,7 @@ pub fn building_occluders(city: &City) -> Result<Occluders, Box<dyn Error>> {
         indices.extend(triangles.iter().map(|i| i + base));
     }
     Ok(Occluders::builder()
-        .mesh(&positions, &indices)?
+        .solid(&positions, &indices)?
         .offset(SHADOW_OFFSET)?
         .build())
 }
@@ -72,9 +73,10 @@ pub fn run_city_mesh(cfg: &Config, quick: bool) -> Result<(), Box<dyn Error>> {
     );
     print_tree(&tree, build);
     println!(
-        "  {} triangles ({} quads), offset {}",
+        "  {} triangles ({} quads), {} boxes found inside the buildings, offset {}",
         occluders.triangles(),
         occluders.quads(),
+        occluders.solid_boxes().len(),
         occluders.offset()
     );
     let shader = Lambert::new(scene.material.kd);
