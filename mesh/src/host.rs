@@ -173,17 +173,33 @@ impl<'o> Shadows<'o> {
         let crowded = occ.bvh.any_in(
             |b| shaft.meets(b),
             |slot| {
-                if shaft.meets(&occ.bounds[slot]) {
-                    candidates.push(slot as u32);
+                let b = &occ.bounds[slot];
+                if shaft.meets(b) {
+                    match occ.prims[slot] {
+                        // The part the point lies in (its own building):
+                        // every ray starts inside its bounds, so its members
+                        // that meet the shaft are tested instead.
+                        Prim::Part { first, end } if b.contains_point(point.into()) => {
+                            candidates.extend(
+                                (first..end).filter(|&m| shaft.meets(&occ.bounds[m as usize])),
+                            );
+                        }
+                        _ => candidates.push(slot as u32),
+                    }
                 }
                 candidates.len() > BATCH_CANDIDATES_MAX
             },
         );
-        // Boxes first: a ray through a solid meets the box inside it, which
-        // answers with one slab test.
+        // Boxes first, then the parts of solids (whose rays try the boxes
+        // inside them first): a ray through a solid meets a box inside it,
+        // which answers with one slab test.
         let occ = self.occluders;
         self.candidates
-            .sort_unstable_by_key(|&slot| !matches!(occ.prims[slot as usize], Prim::Box));
+            .sort_unstable_by_key(|&slot| match occ.prims[slot as usize] {
+                Prim::Box => 0,
+                Prim::Part { .. } => 1,
+                Prim::Triangle { .. } => 2,
+            });
         !crowded
     }
 
@@ -213,12 +229,18 @@ impl<'o> Shadows<'o> {
         // surface the apex lies on) cannot block one.
         let t_min_bound = (f64::from(occ.offset) / box_reach(from, target)).min(1.0);
         let m = 2.0 * f64::from(magnitude);
-        let blocks_some = |slot: usize| {
+        let member = |slot: usize| {
             shaft.meets(&occ.bounds[slot])
                 && match &occ.prims[slot] {
-                    Prim::Box => true,
                     Prim::Triangle { v, .. } => !clears(v, from, target, t_min_bound, m),
+                    _ => true,
                 }
+        };
+        let blocks_some = |slot: usize| match occ.prims[slot] {
+            Prim::Part { first, end } => {
+                shaft.meets(&occ.bounds[slot]) && (first as usize..end as usize).any(member)
+            }
+            _ => member(slot),
         };
         if occ.bvh.any_in(|b| shaft.meets(b), blocks_some) {
             Coverage::Partial
@@ -254,37 +276,42 @@ impl<'o> Shadows<'o> {
         let within = magnitude <= BLOCKER_REACH * occ.scale;
         let m = 2.0 * f64::from(magnitude);
         let (mut tried, mut boxes_tried, mut occluded, mut centre_blocked) = (0, 0, false, false);
-        let mut last = NO_PARTNER;
         // Triangles (or quads) to try once the traversal is over: a box is
         // tried at once (its test is cheap, and in a solid it is the
         // likely blocker), a triangle's test only if no box blocks.
         let mut triangles = [0u32; BLOCKER_CANDIDATES];
-        occ.bvh.any_along(&between, |slot| {
+        let mut visit = |slot: usize| {
             // An occluder that blocks every segment blocks the one between
             // the centres: only those are tried, and a quad once.
-            if !occ.hits(slot, &between, centre, middle, t_min) {
+            if !occ.hits_one(slot, &between, centre, middle, t_min) {
                 return false;
             }
             centre_blocked = true;
             match occ.prims[slot] {
-                Prim::Box => {
-                    boxes_tried += 1;
-                    occluded = box_blocks(&occ.bounds[slot], from, target, margin, occ.offset);
-                }
                 Prim::Triangle { partner, .. } => {
-                    if partner == last && partner != NO_PARTNER {
+                    if partner != NO_PARTNER && triangles[..tried].contains(&partner) {
                         return false;
                     }
-                    last = slot as u32;
                     if tried < BLOCKER_CANDIDATES {
                         triangles[tried] = slot as u32;
                         tried += 1;
                     }
                 }
+                _ => {
+                    boxes_tried += 1;
+                    occluded = box_blocks(&occ.bounds[slot], from, target, margin, occ.offset);
+                }
             }
             occluded
                 || (tried == BLOCKER_CANDIDATES
                     && (boxes_tried >= BLOCKER_CANDIDATES || occ.boxes() == 0))
+        };
+        occ.bvh.any_along(&between, |slot| match occ.prims[slot] {
+            // A part's members, its boxes first.
+            Prim::Part { first, end } => {
+                between.hits(&occ.bounds[slot]) && (first as usize..end as usize).any(&mut visit)
+            }
+            _ => visit(slot),
         });
         if occluded || !(within && gap > 0.0) {
             return (occluded, centre_blocked);

@@ -101,5 +101,5 @@ pub use occluders::{
     BLOCKER_REACH, DEFAULT_OFFSET_SCALE, MARGIN_ULPS, Occluders, OccludersBuilder,
     QUAD_COPLANAR_COS, RAY_BOX_ULPS, box_mesh,
 };
-pub use solid::{BOXES_PER_PART, GRID_CELLS};
+pub use solid::{BOXES_PER_PART, GRID_CELLS, open_edges};
 pub use triangle::PREDICATE_SLACK;

@@ -10,7 +10,7 @@ use obvhs::aabb::Aabb as BvhAabb;
 use crate::bvh::{Bvh, Segment, to_bvh};
 use crate::error::MeshError;
 use crate::host::Shadows;
-use crate::solid::{interior_boxes, open_edges};
+use crate::solid::{open_edges, solid_parts};
 use crate::triangle::crosses;
 
 /// Triangles' boxes, as the BVH and the shafts see them, are grown by this
@@ -92,6 +92,10 @@ pub(crate) enum Prim {
     },
     /// The box in the same slot of `Occluders::bounds`.
     Box,
+    /// A connected part of a solid, one leaf of the BVH (its slot's bounds
+    /// hold its members'): its members, boxes first, then triangles, are
+    /// the slots `first..end`, none of them a part.
+    Part { first: u32, end: u32 },
 }
 
 /// Opaque occluders, triangles and axis-aligned boxes, in a BVH of the
@@ -143,6 +147,16 @@ impl OccludersBuilder {
     /// vertices) block no segment and are dropped, counted by
     /// [`Occluders::degenerate`].
     pub fn mesh(mut self, positions: &[Vec3], indices: &[u32]) -> Result<Self, MeshError> {
+        self.check_mesh(positions, indices)?;
+        for t in indices.chunks_exact(3) {
+            let v = [0, 1, 2].map(|k| positions[t[k] as usize]);
+            self.push_triangle(v);
+        }
+        Ok(self)
+    }
+
+    /// Counts a mesh and checks it (see [`mesh`](Self::mesh)): its number.
+    fn check_mesh(&mut self, positions: &[Vec3], indices: &[u32]) -> Result<usize, MeshError> {
         let mesh = self.meshes;
         self.meshes += 1;
         if let Some(vertex) = positions.iter().position(|p| !p.is_finite()) {
@@ -164,11 +178,7 @@ impl OccludersBuilder {
                 vertices: positions.len(),
             });
         }
-        for t in indices.chunks_exact(3) {
-            let v = [0, 1, 2].map(|k| positions[t[k] as usize]);
-            self.push_triangle(v);
-        }
-        Ok(self)
+        Ok(mesh)
     }
 
     /// Adds a *solid*: a closed indexed triangle mesh whose enclosed region
@@ -195,21 +205,18 @@ impl OccludersBuilder {
     ///
     /// Errors as [`mesh`](Self::mesh) does, and with
     /// [`MeshError::NotClosed`] on a mesh that is not closed.
-    pub fn solid(self, positions: &[Vec3], indices: &[u32]) -> Result<Self, MeshError> {
-        let mut builder = self.mesh(positions, indices)?;
+    pub fn solid(mut self, positions: &[Vec3], indices: &[u32]) -> Result<Self, MeshError> {
+        let mesh = self.check_mesh(positions, indices)?;
         let triangles: Vec<[Vec3; 3]> = indices
             .chunks_exact(3)
             .map(|t| [0, 1, 2].map(|k| positions[t[k] as usize]))
             .collect();
         let open_edges = open_edges(&triangles);
         if open_edges > 0 {
-            return Err(MeshError::NotClosed {
-                mesh: builder.meshes - 1,
-                open_edges,
-            });
+            return Err(MeshError::NotClosed { mesh, open_edges });
         }
-        builder.solids.extend(triangles);
-        Ok(builder)
+        self.solids.extend(triangles);
+        Ok(self)
     }
 
     /// Adds triangles given by their corners (a triangle soup): errors on a
@@ -275,39 +282,81 @@ impl OccludersBuilder {
 
     /// The occluders in their BVH. An empty set (no mesh, no box) is valid:
     /// its hosts see everything.
-    pub fn build(mut self) -> Occluders {
+    pub fn build(self) -> Occluders {
         let scale = self
             .triangles
             .iter()
+            .chain(&self.solids)
             .flatten()
             .chain(self.boxes.iter().flat_map(|b| [&b.min, &b.max]))
             .fold(0.0f32, |m, p| m.max(p.abs().max_element()));
         let offset = self.offset.unwrap_or(DEFAULT_OFFSET_SCALE * scale);
         let inset = 2.0 * f64::from(offset) + 2.0 * f64::from(MARGIN_ULPS * f32::EPSILON * scale);
-        let solid_boxes = if self.solids.is_empty() {
+        let parts = if self.solids.is_empty() {
             Vec::new()
         } else {
-            interior_boxes(&self.solids, inset)
+            solid_parts(&self.solids, inset)
         };
-        self.boxes.extend_from_slice(&solid_boxes);
         let grow = RAY_BOX_ULPS * f32::EPSILON * scale;
-        let mut bounds: Vec<BvhAabb> = self
-            .triangles
-            .iter()
-            .map(|t| {
-                let (min, max) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
-                BvhAabb::new(Vec3A::from(min) - grow, Vec3A::from(max) + grow)
-            })
-            .collect();
+        let triangle_box = |t: &[Vec3; 3]| {
+            let (min, max) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+            BvhAabb::new(Vec3A::from(min) - grow, Vec3A::from(max) + grow)
+        };
+        // The BVH's leaves: the loose triangles, the boxes given, and one
+        // leaf per part of a solid (the union of its members' boxes).
+        let mut bounds: Vec<BvhAabb> = self.triangles.iter().map(triangle_box).collect();
         bounds.extend(self.boxes.iter().map(to_bvh));
+        for part in &parts {
+            let mut b = BvhAabb::empty();
+            for t in &part.triangles {
+                b = b.union(&triangle_box(t));
+            }
+            for x in &part.boxes {
+                b = b.union(&to_bvh(x));
+            }
+            bounds.push(b);
+        }
         let partners = pair_quads(&self.triangles);
         let (bvh, order) = Bvh::new(&bounds);
         let mut slot_of = vec![0u32; order.len()];
         for (slot, &input) in order.iter().enumerate() {
             slot_of[input as usize] = slot as u32;
         }
-        let tri_count = self.triangles.len();
-        let prims = order
+        let (tri_count, box_count) = (self.triangles.len(), self.boxes.len());
+        // The parts' members take the slots after the leaves': a part's
+        // boxes, then its triangles.
+        let mut member_bounds = Vec::new();
+        let mut members = Vec::new();
+        let mut ranges = Vec::with_capacity(parts.len());
+        let mut quads = partners.iter().flatten().count() / 2;
+        for part in &parts {
+            let first = order.len() + members.len();
+            for x in &part.boxes {
+                member_bounds.push(to_bvh(x));
+                members.push(Prim::Box);
+            }
+            let base = order.len() + members.len();
+            let pairs = pair_quads(&part.triangles);
+            quads += pairs.iter().flatten().count() / 2;
+            for (t, pair) in part.triangles.iter().zip(&pairs) {
+                let (partner, shared) = match *pair {
+                    Some((other, edge)) => {
+                        let mut shared = [false; 3];
+                        shared[edge] = true;
+                        ((base + other) as u32, shared)
+                    }
+                    None => (NO_PARTNER, [false; 3]),
+                };
+                member_bounds.push(triangle_box(t));
+                members.push(Prim::Triangle {
+                    v: *t,
+                    partner,
+                    shared,
+                });
+            }
+            ranges.push((first as u32, (order.len() + members.len()) as u32));
+        }
+        let mut prims: Vec<Prim> = order
             .iter()
             .map(|&input| {
                 let input = input as usize;
@@ -325,23 +374,30 @@ impl OccludersBuilder {
                         partner,
                         shared,
                     }
-                } else {
+                } else if input < tri_count + box_count {
                     Prim::Box
+                } else {
+                    let (first, end) = ranges[input - tri_count - box_count];
+                    Prim::Part { first, end }
                 }
             })
             .collect();
-        let bounds = order.iter().map(|&i| bounds[i as usize]).collect();
+        prims.extend(members);
+        let mut bounds: Vec<BvhAabb> = order.iter().map(|&i| bounds[i as usize]).collect();
+        bounds.extend(member_bounds);
+        let solid_boxes: Vec<Aabb> = parts.iter().flat_map(|p| p.boxes.iter().copied()).collect();
+        let part_triangles: usize = parts.iter().map(|p| p.triangles.len()).sum();
         Occluders {
             bounds,
             prims,
             bvh,
             scale,
             offset,
-            triangles: tri_count,
-            boxes: self.boxes.len(),
+            triangles: tri_count + part_triangles,
+            boxes: box_count + solid_boxes.len(),
             solid_boxes,
-            degenerate: self.degenerate,
-            quads: partners.iter().flatten().count() / 2,
+            degenerate: self.degenerate + parts.iter().map(|p| p.degenerate).sum::<usize>(),
+            quads,
         }
     }
 }
@@ -494,10 +550,30 @@ impl Occluders {
         to: Vec3,
         t_min: f64,
     ) -> bool {
+        match self.prims[slot] {
+            Prim::Part { first, end } => {
+                segment.hits(&self.bounds[slot])
+                    && (first as usize..end as usize)
+                        .any(|m| self.hits_one(m, segment, from, to, t_min))
+            }
+            _ => self.hits_one(slot, segment, from, to, t_min),
+        }
+    }
+
+    /// [`hits`](Self::hits) for a box or a triangle (not a part).
+    #[inline]
+    pub(crate) fn hits_one(
+        &self,
+        slot: usize,
+        segment: &Segment,
+        from: Vec3,
+        to: Vec3,
+        t_min: f64,
+    ) -> bool {
         let b = &self.bounds[slot];
-        match &self.prims[slot] {
-            Prim::Box => segment.hits_from(b, t_min as f32),
-            Prim::Triangle { v, .. } => segment.hits(b) && crosses(from, to, t_min, v),
+        match self.prims[slot] {
+            Prim::Triangle { ref v, .. } => segment.hits(b) && crosses(from, to, t_min, v),
+            _ => segment.hits_from(b, t_min as f32),
         }
     }
 }

@@ -3,7 +3,7 @@
 //! A triangle mesh blocks a node as a whole only through one of its
 //! triangles (or quads), and a building made of triangles has none that
 //! covers what the building hides. A *solid* is a closed mesh whose
-//! enclosed region is opaque; [`interior_boxes`] finds axis-aligned boxes
+//! enclosed region is opaque; [`solid_parts`] finds axis-aligned boxes
 //! inside that region, which the occluders then hold as box occluders: a
 //! box blocks every segment that passes through it, and the classifier
 //! proves that for a whole node from its corners.
@@ -57,9 +57,24 @@ fn key(p: Vec3) -> [u32; 3] {
     p.to_array().map(|x| (x + 0.0).to_bits())
 }
 
-/// The number of edges, over vertices identified by position, traversed
-/// more often in one direction than in the other (0 for a closed mesh).
-pub(crate) fn open_edges(triangles: &[[Vec3; 3]]) -> usize {
+/// The number of edges of a mesh, over vertices identified by position,
+/// traversed more often in one direction than in the other: 0 for a closed
+/// mesh, which [`OccludersBuilder::solid`](crate::OccludersBuilder::solid)
+/// takes (see the rules there).
+///
+/// ```
+/// use manylights::Aabb;
+/// use manylights_mesh::{box_mesh, open_edges};
+/// # use glam::Vec3;
+/// let (corners, indices) = box_mesh(&Aabb { min: Vec3::ZERO, max: Vec3::ONE });
+/// let triangles: Vec<[Vec3; 3]> = indices
+///     .chunks_exact(3)
+///     .map(|t| [0, 1, 2].map(|k| corners[t[k] as usize]))
+///     .collect();
+/// assert_eq!(open_edges(&triangles), 0);
+/// assert_eq!(open_edges(&triangles[..10]), 4); // a face missing
+/// ```
+pub fn open_edges(triangles: &[[Vec3; 3]]) -> usize {
     let mut balance: HashMap<([u32; 3], [u32; 3]), i64> = HashMap::new();
     for t in triangles {
         for k in 0..3 {
@@ -107,9 +122,20 @@ fn parts(triangles: &[[Vec3; 3]]) -> Vec<Vec<[Vec3; 3]>> {
     out
 }
 
-/// Boxes inside the solid bounded by the closed mesh `triangles` (see the
-/// module documentation), each at least `inset` from the surface.
-pub(crate) fn interior_boxes(triangles: &[[Vec3; 3]], inset: f64) -> Vec<Aabb> {
+/// A connected part of a solid: its triangles of nonzero area, the boxes
+/// found inside the solid on its grid, and how many of its triangles had
+/// zero area.
+#[derive(Clone, Debug)]
+pub(crate) struct SolidPart {
+    pub triangles: Vec<[Vec3; 3]>,
+    pub boxes: Vec<Aabb>,
+    pub degenerate: usize,
+}
+
+/// The connected parts of the solid bounded by the closed mesh `triangles`,
+/// each with boxes inside the solid at least `inset` from the surface (see
+/// the module documentation).
+pub(crate) fn solid_parts(triangles: &[[Vec3; 3]], inset: f64) -> Vec<SolidPart> {
     let parts = parts(triangles);
     let bounds: Vec<(Vec3, Vec3)> = parts
         .iter()
@@ -121,19 +147,33 @@ pub(crate) fn interior_boxes(triangles: &[[Vec3; 3]], inset: f64) -> Vec<Aabb> {
                 })
         })
         .collect();
-    let mut boxes = Vec::new();
-    for (part, &(lo, hi)) in parts.iter().zip(&bounds) {
-        // The parts whose boxes meet this one's: a closed part's winding
-        // number is 0 outside its box, and its triangles lie in it.
-        let near: Vec<[Vec3; 3]> = parts
-            .iter()
-            .zip(&bounds)
-            .filter(|(_, (l, h))| l.cmple(hi).all() && lo.cmple(*h).all())
-            .flat_map(|(p, _)| p.iter().copied())
-            .collect();
-        boxes.extend(part_boxes(part, &near, inset));
-    }
-    boxes
+    parts
+        .iter()
+        .zip(&bounds)
+        .map(|(part, &(lo, hi))| {
+            // The parts whose boxes meet this one's: a closed part's winding
+            // number is 0 outside its box, and its triangles lie in it.
+            let near: Vec<[Vec3; 3]> = parts
+                .iter()
+                .zip(&bounds)
+                .filter(|(_, (l, h))| l.cmple(hi).all() && lo.cmple(*h).all())
+                .flat_map(|(p, _)| p.iter().copied())
+                .collect();
+            let kept: Vec<[Vec3; 3]> = part
+                .iter()
+                .copied()
+                .filter(|t| {
+                    let [a, b, c] = t.map(Vec3::as_dvec3);
+                    (b - a).cross(c - a) != DVec3::ZERO
+                })
+                .collect();
+            SolidPart {
+                degenerate: part.len() - kept.len(),
+                triangles: kept,
+                boxes: part_boxes(part, &near, inset),
+            }
+        })
+        .collect()
 }
 
 /// A box in `f64`.
@@ -340,6 +380,13 @@ fn meets(t: &[Vec3; 3], c: &Cell, tolerance: f64) -> bool {
 mod tests {
     use super::*;
     use crate::box_mesh;
+
+    fn interior_boxes(triangles: &[[Vec3; 3]], inset: f64) -> Vec<Aabb> {
+        solid_parts(triangles, inset)
+            .into_iter()
+            .flat_map(|p| p.boxes)
+            .collect()
+    }
 
     fn triangles(positions: &[Vec3], indices: &[u32]) -> Vec<[Vec3; 3]> {
         indices

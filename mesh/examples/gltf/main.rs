@@ -8,7 +8,14 @@
 //! cargo run --release -p manylights-mesh --example gltf -- scene.glb   # your scene
 //! cargo run --release -p manylights-mesh --example gltf                # a built-in street, 700 lights
 //! cargo run --release -p manylights-mesh --example gltf -- scene.glb --size 640x360 --threshold 0.02 --out out
+//! cargo run --release -p manylights-mesh --example gltf -- scene.glb --solids
 //! ```
+//!
+//! With `--solids` (the default for the built-in street, whose buildings
+//! are closed boxes; `--surfaces` turns it off), every closed mesh is an
+//! opaque solid (`OccludersBuilder::solid`): boxes found inside it let the
+//! host prove that it hides a node as a whole. Leave it off for a scene
+//! seen from inside a closed mesh (a room).
 //!
 //! Writes `<out>/gltf_tree.png` (the certified render) and
 //! `<out>/gltf_diff.png` (its error against the exact shadowed sum, one
@@ -24,7 +31,7 @@ use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use manylights::{Lambert, LightTree, Query, ShadeResult, Threshold};
-use manylights_mesh::{Occluders, box_mesh};
+use manylights_mesh::{Occluders, box_mesh, open_edges};
 use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
 use rayon::prelude::*;
@@ -46,8 +53,8 @@ fn main() -> std::process::ExitCode {
 
 fn run() -> Result<(), Box<dyn Error>> {
     let mut args = std::env::args().skip(1);
-    let (mut path, mut size, mut threshold, mut out) =
-        (None, (320, 180), 0.01, PathBuf::from("out"));
+    let (mut path, mut size, mut threshold, mut out, mut solids) =
+        (None, (320, 180), 0.01, PathBuf::from("out"), None);
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--size" => {
@@ -59,6 +66,8 @@ fn run() -> Result<(), Box<dyn Error>> {
                 threshold = args.next().ok_or("--threshold needs a number")?.parse()?
             }
             "--out" => out = args.next().ok_or("--out needs a folder")?.into(),
+            "--solids" => solids = Some(true),
+            "--surfaces" => solids = Some(false),
             _ => path = Some(PathBuf::from(arg)),
         }
     }
@@ -83,7 +92,30 @@ fn run() -> Result<(), Box<dyn Error>> {
     if scene.directional > 0 {
         println!("note: {} directional lights skipped", scene.directional);
     }
-    render(&scene, size, threshold, &out)
+    // Solids by default only for the built-in street.
+    let solids = solids.unwrap_or(path.is_none());
+    render(&scene, size, threshold, &out, solids)
+}
+
+/// The scene's triangles as occluders: with `solids`, each closed mesh as a
+/// solid and the others as loose triangles.
+fn occluders(scene: &Scene, solids: bool) -> Result<Occluders, Box<dyn Error>> {
+    let mut builder = Occluders::builder();
+    let mut loose = Vec::new();
+    for range in &scene.meshes {
+        let triangles = &scene.triangles[range.clone()];
+        if solids && open_edges(triangles) == 0 {
+            let positions: Vec<Vec3> = triangles.iter().flatten().copied().collect();
+            let indices: Vec<u32> = (0..positions.len() as u32).collect();
+            builder = builder.solid(&positions, &indices)?;
+        } else {
+            loose.extend_from_slice(triangles);
+        }
+    }
+    if !loose.is_empty() {
+        builder = builder.triangles(&loose)?;
+    }
+    Ok(builder.build())
 }
 
 /// The built-in scene: a street of box buildings on a ground, lit windows
@@ -199,15 +231,17 @@ fn render(
     (width, height): (u32, u32),
     threshold: f64,
     out: &Path,
+    solids: bool,
 ) -> Result<(), Box<dyn Error>> {
-    let occluders = Occluders::builder().triangles(&scene.triangles)?.build();
+    let occluders = occluders(scene, solids)?;
     let tree = LightTree::build_emitters(&scene.lights)?;
     let view = scene.view.unwrap_or_else(|| default_view(scene));
     println!(
-        "{} triangles ({} dropped as degenerate), {} lights ({} spots), {width}x{height}, \
-         certified {}%",
+        "{} triangles ({} dropped as degenerate; {} boxes found inside closed meshes), \
+         {} lights ({} spots), {width}x{height}, certified {}%",
         occluders.triangles(),
         scene.degenerate,
+        occluders.solid_boxes().len(),
         scene.lights.len(),
         scene.spots,
         threshold * 100.0

@@ -29,6 +29,9 @@ pub struct Scene {
     /// World-space triangles and each one's base colour.
     pub triangles: Vec<[Vec3; 3]>,
     pub albedo: Vec<Vec3>,
+    /// The triangles of each mesh instance (a node's mesh, all its
+    /// primitives), as ranges of `triangles`.
+    pub meshes: Vec<std::ops::Range<usize>>,
     /// The point lights (isotropic) and spot lights (glTF spots along
     /// their node's `-z`), in the order the nodes are visited.
     pub lights: Vec<Emitter>,
@@ -180,6 +183,7 @@ pub fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, LoadError> {
             return Err(LoadError::BadTransform);
         }
         if let Some(mesh) = node.mesh() {
+            let first = scene.triangles.len();
             for primitive in mesh.primitives() {
                 if primitive.mode() != gltf::mesh::Mode::Triangles {
                     continue;
@@ -232,6 +236,9 @@ pub fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, LoadError> {
                         scene.albedo.push(albedo);
                     }
                 }
+            }
+            if scene.triangles.len() > first {
+                scene.meshes.push(first..scene.triangles.len());
             }
         }
         if let Some(light) = node.light() {
