@@ -42,6 +42,11 @@
 //!   self-intersection offset. The rays define the visibility of the
 //!   model, so [`Shading::exact_query`](manylights::Shading::exact_query)
 //!   with a host is the exact shadowed sum the bound is certified against.
+//! * Solids ([`OccludersBuilder::solid`]): a closed mesh whose enclosed
+//!   region is opaque, such as a building. The builder finds boxes inside
+//!   it, box occluders that let the host prove the solid hides a node as a
+//!   whole where no single triangle or quad of it does, and makes each of
+//!   its connected parts one leaf of the BVH.
 //! * [`shaft`]: the shafts of Haines and Wallace (1994) between a point or a
 //!   box and a box.
 //!

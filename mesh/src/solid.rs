@@ -21,16 +21,17 @@
 //!
 //! # The boxes
 //!
-//! Each connected part of the mesh (triangles sharing vertices) is
-//! searched on a grid over its bounding box, against its own triangles and
-//! those of the parts whose bounding boxes meet its own (a closed part's
-//! winding number is 0 outside its bounding box): the planes of those
-//! triangles' vertices' coordinates (clamped to the box) along each axis (a box-shaped building is one cell), or,
-//! where there are more than [`GRID_CELLS`] of them, [`GRID_CELLS`] equal
-//! cells (fewer on a mesh of many triangles). A cell, shrunk by the inset,
-//! is inside when no triangle meets it (a separating-axis test, in `f64`,
-//! that declares a separation only with room for its rounding) and the
-//! winding number at its centre rounds, clearly, to a nonzero integer.
+//! Each connected part of the mesh (triangles sharing vertices; a part of
+//! a closed mesh is closed) is searched on a grid over its bounding box,
+//! against its own triangles and those of the parts whose bounding boxes
+//! meet its own (a closed part's winding number is 0 outside its bounding
+//! box). The grid's planes along each axis are those triangles' vertices'
+//! coordinates, clamped to the box (a box-shaped building is one cell),
+//! or, where there are more than [`GRID_CELLS`] of them, [`GRID_CELLS`]
+//! equal cells (fewer on a mesh of many triangles). A cell, shrunk by the
+//! inset, is inside when no triangle meets it (a separating-axis test, in
+//! `f64`, that declares a separation only with room for its rounding) and
+//! the winding number at its centre rounds, clearly, to a nonzero integer.
 //! Neighbouring inside cells are merged greedily into larger boxes, each of
 //! which is tested against the triangles again (it is kept whole only if
 //! none meets it), and the [`BOXES_PER_PART`] largest of a part are kept,
