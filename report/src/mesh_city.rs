@@ -1,5 +1,6 @@
-//! The occluded city with its buildings as triangles (twelve a building),
-//! shadowed by `manylights-mesh`'s host: per shading point, the tree at a
+//! The occluded city with its buildings as triangles (twelve a building,
+//! all of them one solid: boxes are found inside them), shadowed by
+//! `manylights-mesh`'s host: per shading point, the tree at a
 //! certified 1% against the exact shadowed sum (one shadow ray per light
 //! above the tangent plane), one core, with the rays and classifications
 //! each takes; then the same through the batch call, per pixel of a camera
