@@ -28,7 +28,8 @@
 //! box). The grid's planes along each axis are those triangles' vertices'
 //! coordinates, clamped to the box (a box-shaped building is one cell),
 //! or, where there are more than [`GRID_CELLS`] of them, [`GRID_CELLS`]
-//! equal cells (fewer on a mesh of many triangles). A cell, shrunk by the
+//! equal cells (fewer on a mesh of many triangles or many parts: the work
+//! over a whole solid is bounded). A cell, shrunk by the
 //! inset, is inside when no triangle meets it (a separating-axis test, in
 //! `f64`, that declares a separation only with room for its rounding) and
 //! the winding number at its centre rounds, clearly, to a nonzero integer.
@@ -41,6 +42,9 @@ use std::collections::HashMap;
 
 use glam::{DVec3, Vec3};
 use manylights::Aabb;
+use obvhs::aabb::Aabb as BvhAabb;
+
+use crate::bvh::Bvh;
 
 /// Cells along an axis of a part's grid at most (when its vertices have
 /// more distinct coordinates along it than this plus one).
@@ -49,9 +53,10 @@ pub const GRID_CELLS: usize = 16;
 /// Interior boxes kept per connected part of a solid, the largest first.
 pub const BOXES_PER_PART: usize = 8;
 
-/// The grid's cells times the part's triangles at most: the separating-axis
-/// and winding-number work of one part.
-const WORK: usize = 1 << 22;
+/// The grid's cells times the triangles tested against them, at most, over
+/// all parts of a solid (a part's share, but at least one cell): the
+/// separating-axis and winding-number work.
+const WORK: usize = 1 << 24;
 
 /// A vertex's identity: its position's bits (with `-0` as `+0`).
 fn key(p: Vec3) -> [u32; 3] {
@@ -138,27 +143,42 @@ pub(crate) struct SolidPart {
 /// the module documentation).
 pub(crate) fn solid_parts(triangles: &[[Vec3; 3]], inset: f64) -> Vec<SolidPart> {
     let parts = parts(triangles);
-    let bounds: Vec<(Vec3, Vec3)> = parts
+    let bounds: Vec<BvhAabb> = parts
         .iter()
         .map(|p| {
-            p.iter()
-                .flatten()
-                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &q| {
-                    (lo.min(q), hi.max(q))
-                })
+            p.iter().flatten().fold(BvhAabb::empty(), |b, &q| {
+                BvhAabb::new(b.min.min(q.into()), b.max.max(q.into()))
+            })
         })
         .collect();
+    // The parts' boxes in a BVH, to find the parts whose boxes meet each
+    // part's.
+    let (bvh, order) = Bvh::new(&bounds);
+    // The grid's work over all parts: a scene of many parts gets coarser
+    // grids.
+    let budget = (WORK / parts.len().max(1)).max(1);
+    let mut near_parts = Vec::new();
     parts
         .iter()
         .zip(&bounds)
-        .map(|(part, &(lo, hi))| {
+        .map(|(part, b)| {
             // The parts whose boxes meet this one's: a closed part's winding
             // number is 0 outside its box, and its triangles lie in it.
-            let near: Vec<[Vec3; 3]> = parts
+            near_parts.clear();
+            bvh.any_in(
+                |n| n.intersect_aabb(b),
+                |slot| {
+                    let other = order[slot] as usize;
+                    if bounds[other].intersect_aabb(b) {
+                        near_parts.push(other);
+                    }
+                    false
+                },
+            );
+            near_parts.sort_unstable();
+            let near: Vec<[Vec3; 3]> = near_parts
                 .iter()
-                .zip(&bounds)
-                .filter(|(_, (l, h))| l.cmple(hi).all() && lo.cmple(*h).all())
-                .flat_map(|(p, _)| p.iter().copied())
+                .flat_map(|&k| parts[k].iter().copied())
                 .collect();
             let kept: Vec<[Vec3; 3]> = part
                 .iter()
@@ -171,7 +191,7 @@ pub(crate) fn solid_parts(triangles: &[[Vec3; 3]], inset: f64) -> Vec<SolidPart>
             SolidPart {
                 degenerate: part.len() - kept.len(),
                 triangles: kept,
-                boxes: part_boxes(part, &near, inset),
+                boxes: part_boxes(part, &near, inset, budget),
             }
         })
         .collect()
@@ -209,9 +229,9 @@ fn planes(coords: &mut Vec<f64>, cells: usize) -> Vec<f64> {
 
 /// The boxes of one part, on its own grid, tested against the triangles
 /// `near` (the part's and those of every part whose box meets its box).
-fn part_boxes(part: &[[Vec3; 3]], near: &[[Vec3; 3]], inset: f64) -> Vec<Aabb> {
-    // Grid resolution: the work budget over the triangles.
-    let cells = ((WORK / near.len().max(1)) as f64)
+fn part_boxes(part: &[[Vec3; 3]], near: &[[Vec3; 3]], inset: f64, budget: usize) -> Vec<Aabb> {
+    // Grid resolution: the part's share of the work over the triangles.
+    let cells = ((budget / near.len().max(1)) as f64)
         .cbrt()
         .floor()
         .clamp(1.0, GRID_CELLS as f64) as usize;
@@ -455,6 +475,27 @@ mod tests {
         t.extend(cube(Vec3::new(3.0, 0.0, 0.0), Vec3::new(4.0, 1.0, 2.0)));
         assert_eq!(parts(&t).len(), 2);
         assert_eq!(interior_boxes(&t, 0.01).len(), 2);
+    }
+
+    #[test]
+    fn a_city_of_many_buildings_gets_a_box_in_each() {
+        let mut t = Vec::new();
+        for i in 0..80 {
+            for j in 0..50 {
+                let min = Vec3::new(i as f32 * 3.0, j as f32 * 3.0, 0.0);
+                t.extend(cube(
+                    min,
+                    min + Vec3::new(2.0, 2.0, 1.0 + (i + j) as f32 % 7.0),
+                ));
+            }
+        }
+        let parts = solid_parts(&t, 0.01);
+        assert_eq!(parts.len(), 4000);
+        assert!(
+            parts
+                .iter()
+                .all(|p| p.boxes.len() == 1 && p.triangles.len() == 12)
+        );
     }
 
     #[test]
