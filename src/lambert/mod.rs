@@ -109,6 +109,21 @@ pub enum BoundKind {
 /// continuous in `p` as a node crosses it. Each refined interval is
 /// intersected with the paper's and the box's.
 ///
+/// **The chord** (with [`BoundKind::Series`], in `f64`). Every member's
+/// height `z_i = n.(x_i - p)` lies in `[z_lo, z_hi]`, where `max(0, -z)`
+/// is convex, so it lies below the chord through `(z_lo, -z_lo)` and
+/// `(z_hi, 0)`: `max(0, -z_i) <= -z_lo (z_hi - z_i) / (z_hi - z_lo)`.
+/// Summed with the weights `I_ik`, whose mean height is `zbar_k = n.(c -
+/// p) + n.o_k` ([`Node::channel_offsets`]),
+/// `sum_i I_ik max(0, -z_i) <= I_k (-z_lo) (z_hi - zbar_k) / (z_hi -
+/// z_lo)`, so the clamp term is `I_k min(depth, chord_k) / (D - R)^3` with
+/// `chord_k = -z_lo (z_hi - zbar_k) / (z_hi - z_lo)`. For a node cut in
+/// half by the plane that is about half the depth term. `zbar_k` is
+/// widened downward by its inputs' rounding: `64 eps` of the coordinates'
+/// magnitude for `n.(c - p)`, and `(2 delta + 2^-22) R` for `n.o_k` (the
+/// build's moment rounding `delta` on `sqrt(3)` entries, and the `f32`
+/// storage). The bounds in `f32` lanes keep the depth term.
+///
 /// **Multipole series** ([`BoundKind::Series`], the default). With `uh` the
 /// unit axis from `p` to `c`, `c0 = n . uh`, `sigma = R / D`, and per
 /// channel `k` the node's intensity `I_k`, first moment `o_k`

@@ -18,6 +18,13 @@ use crate::numeric::{COS_SLACK, SECOND_ORDER_SLACK, SERIES_SLACK};
 use crate::shader::NodeEstimate;
 use crate::tree::Node;
 
+/// The rounding of a node's stored per-channel first moment `o_k`
+/// ([`Node::channel_offsets`]) beyond the build's `moment_error`, in units
+/// of the radius: `|o_k| <= R`, stored in `f32` (half an ulp, `2^-24`
+/// relative, per coordinate), dotted with a unit normal (three terms), with
+/// a factor of 4 to spare: `2^-22`.
+const CHORD_MOMENT_SLACK: f64 = 1.0 / 4_194_304.0;
+
 /// Nodes bounded side by side by
 /// [`Shader::bound_nodes`](crate::shader::Shader::bound_nodes): two 4-wide AVX2
 /// vectors of `f64`.
@@ -151,8 +158,11 @@ struct Prefix<const N: usize> {
     /// coordinates' magnitude).
     lowest: Lanes<N>,
     highest: Lanes<N>,
-    /// Bound on `sum (f - g) / I` in units of `1/D^2`.
+    /// Bound on `sum (f - g) / I` in units of `1/D^2`: the depth term.
     straddle: Lanes<N>,
+    /// The same per channel, the smaller of the depth term and the chord
+    /// term (see [`Lambert`]'s docs).
+    straddle_rgb: Rgb<N>,
     /// `I kd / D^2`.
     scale: Rgb<N>,
     /// The paper's interval and the virtual light.
@@ -220,6 +230,29 @@ impl<const N: usize> Prefix<N> {
         // at most the box's depth. Zero when the box lies above the plane,
         // and continuous as a node crosses it. In units of 1/D^2.
         let depth = (sd - z).min(-lowest * inv_d).max(zero);
+        // The chord: on [lowest, highest] the convex (-h)^+ lies below the
+        // line through (lowest, -lowest) and (highest, 0), so
+        // sum_i I_ik (-h_i)^+ <= I_k (-lowest) (highest - hbar_k) / (highest
+        // - lowest), hbar_k = n.(c - p) + n.o_k the members' mean height for
+        // channel k. hbar_k is widened downward by the rounding of its
+        // inputs (n.o_k within (2 moment_error + 2^-22) R: sqrt(3) entries of
+        // moment_error R each, and the f32 storage, see
+        // CHORD_MOMENT_SLACK) so that the chord stays above.
+        let c = Vec3Lanes::from_fn(|i| nodes[i].centroid.as_dvec3().to_array());
+        let centre_height = c.minus(p.to_array()).dot_with(n.to_array());
+        let radius = Lanes::from_fn(|i| f64::from(nodes[i].radius));
+        let moment_slack = (Lanes::from_fn(|i| 2.0 * f64::from(nodes[i].moment_error))
+            + CHORD_MOMENT_SLACK)
+            * radius;
+        let span = highest - lowest;
+        let below = (-lowest).max(zero);
+        let straddle_rgb = rgb(|k| {
+            let o = Vec3Lanes::from_fn(|i| nodes[i].channel_offsets[k].as_dvec3().to_array());
+            let mean = centre_height + o.dot_with(n.to_array()) - moment_slack - slack;
+            let room = (highest - mean).max(zero).min(span);
+            let chord = below * (room / span.max(Lanes::splat(f64::MIN_POSITIVE)));
+            depth.min(chord * inv_d) * inv_rho3
+        });
         Self {
             axis,
             inv_d,
@@ -233,6 +266,7 @@ impl<const N: usize> Prefix<N> {
             lowest,
             highest,
             straddle: depth * inv_rho3,
+            straddle_rgb,
             scale,
             virtual_light: rgb(|k| scale[k] * z_plus),
             lower: rgb(|k| scale[k] * lower_cos),
@@ -361,6 +395,6 @@ fn series_lanes<const N: usize>(
         },
     );
     let lo2 = rgb(|k| g.scale[k] * (series[k] - width[k]));
-    let hi2 = rgb(|k| g.scale[k] * (series[k] + width[k] + g.straddle));
+    let hi2 = rgb(|k| g.scale[k] * (series[k] + width[k] + g.straddle_rgb[k]));
     (lo2, hi2)
 }

@@ -14,7 +14,9 @@
 //! `R`, seen from the point `p` with unit normal `n` at distance
 //! `D = |c - p| > R`; `g(x) = n.(x - p) / |x - p|^3` is the smooth term and
 //! `f = max(0, g)` the model's, which exceeds `g` only below the tangent
-//! plane, by at most the clamp term `I_k depth / (D - R)^3` per channel.
+//! plane, by at most the clamp term `I_k depth / (D - R)^3` per channel
+//! (or, in `f64`, `I_k min(depth, chord_k) / (D - R)^3`: see the chord in
+//! [`Lambert`]'s docs).
 //! Every bound below holds per channel `k` whenever the node's cone exists
 //! (`D - R > D * MIN_CLEARANCE`, see [`Cone::new`]), for any unit normal,
 //! including nodes that straddle the tangent plane.

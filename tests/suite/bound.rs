@@ -132,6 +132,62 @@ proptest! {
         check_point(&mut shading, |s, t| s.shade(p, n, t).unwrap(), exact, t, p)?;
     }
 
+    /// Lights in a slab of thickness `10^-6` to `10` around a plane at any
+    /// tilt, shading points inside the slab with normals from exactly the
+    /// plane's to a tenth of a radian off it (either side): every node the
+    /// cut meets straddles the tangent plane, which the bound's clamp terms
+    /// (depth and chord) must cover. Single points and a batch.
+    #[test]
+    fn lambert_bound_holds_in_slabs_around_tilted_planes(
+        count in 50usize..1500,
+        axis in direction(),
+        thickness in -6.0f32..=1.0,
+        seed in any::<u64>(),
+        colours in prop::collection::vec(intensity(), 8),
+        (u, v, h) in (-40.0f32..=40.0, -40.0f32..=40.0, -0.5f32..=0.5),
+        tilt in (-7.0f32..=-1.0, direction(), any::<bool>(), any::<bool>()),
+        kd in albedo(),
+        t in threshold(),
+    ) {
+        let a = axis.normalize();
+        let b = a.any_orthonormal_vector();
+        let c = a.cross(b);
+        let thickness = 10f32.powf(thickness);
+        let mut state = seed;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let lights: Vec<_> = (0..count)
+            .map(|i| {
+                let position = b * (100.0 * uniform()) + c * (100.0 * uniform()) + a * (thickness * uniform());
+                manylights::PointLight::new(position, colours[i % colours.len()])
+            })
+            .collect();
+        let tree = LightTree::build(&lights).unwrap();
+        let mut shading = tree.shading(Lambert::new(kd));
+        let p = b * u + c * v + a * (thickness * h);
+        let (angle, off, exact_plane, flip) = tilt;
+        let n = if exact_plane { a } else { (a + off.normalize() * 10f32.powf(angle)).normalize() };
+        let n = if flip { -n } else { n };
+        let exact = shading.exact(p, n).unwrap();
+        check_point(&mut shading, |s, t| s.shade(p, n, t).unwrap(), exact, t, p)?;
+
+        let queries: Vec<_> = (0..16)
+            .filter_map(|i| {
+                let q = p + b * ((i % 4) as f32 * 0.3) + c * ((i / 4) as f32 * 0.3);
+                Query::new(q, n).ok()
+            })
+            .collect();
+        let mut results = vec![ShadeResult::default(); queries.len()];
+        shading.shade_batch(&queries, t, Unoccluded, &mut results).unwrap();
+        for (q, r) in queries.iter().zip(&results) {
+            check_bound(r, shading.exact_query(q, Unoccluded))?;
+        }
+    }
+
     /// The specular criterion refines every node whose upper bound exceeds
     /// it: afterwards no single node's bound can exceed it, so the whole
     /// error bound is at most (number of unrefined nodes) times it.
