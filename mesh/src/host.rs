@@ -4,20 +4,24 @@ use glam::{DVec3, Vec3};
 use manylights::{Aabb, Coverage, NodeRegion, PointGroup, Visibility};
 use obvhs::aabb::Aabb as BvhAabb;
 
-use crate::bvh::{Segment, distinct_corners};
+use crate::bvh::{Fan, Segment, distinct_corners};
+use crate::lists::{Lists, SMALL_NODE_LIGHTS};
 use crate::occluders::{BLOCKER_REACH, MARGIN_ULPS, NO_PARTNER, Occluders, Prim};
 use crate::shaft::Shaft;
 use crate::triangle::{blocks, clears};
 
-/// Occluders tried as the single blocker of a node: the first few triangles
-/// (a quad counted once), and the first few boxes, that the shadow ray
+/// Occluders tried as the single blocker of a node: the first few boxes,
+/// and the first few triangles (a quad counted once), that the shadow ray
 /// between the centres of the apex's box and the node's box hits (one that
-/// does not cannot block every segment), in the BVH's traversal order. The
-/// boxes are counted apart so that the walls a ray crosses into a solid do
-/// not use up the tries before the box inside it
-/// ([`OccludersBuilder::solid`](crate::OccludersBuilder::solid)). A blocker of a whole node is
-/// nearly always among them, and a long segment through foliage meets many
-/// occluders that cannot be one.
+/// does not cannot block every segment), in the order of the BVH's
+/// traversal or of the candidate list the node lies in (boxes first). The
+/// triangles are tried only when the ray hits no box: where it crosses a
+/// solid ([`OccludersBuilder::solid`](crate::OccludersBuilder::solid)) the
+/// box inside it blocks whatever the solid's walls block, less a sliver
+/// at the walls (in a city of solids, under 2% of the tries of a triangle
+/// after a box succeeded, at a tenth of the host's work). A blocker of a
+/// whole node is nearly always among them, and a long segment through
+/// foliage meets many occluders that cannot be one.
 pub const BLOCKER_CANDIDATES: usize = 4;
 
 /// Occluders a batch of shadow rays from one point
@@ -65,8 +69,9 @@ pub const BATCH_CANDIDATES_MAX: usize = 64;
 ///   or a quad of two, whose predicates clear their slack at every pair of
 ///   corners (see `triangle`'s rounding note in the crate documentation),
 ///   crossed at least the offset from the apex. Only the first
-///   [`BLOCKER_CANDIDATES`] triangles and boxes that the shadow ray between the two
-///   boxes' centres hits are tried.
+///   [`BLOCKER_CANDIDATES`] boxes and triangles that the shadow ray between
+///   the two boxes' centres hits are tried, triangles only if it hits no
+///   box.
 /// * [`Coverage::Partial`] when a shadow ray between the two centres is
 ///   blocked.
 /// * [`Coverage::Visible`] when no occluder's box (a triangle's grown by
@@ -95,6 +100,41 @@ pub const BATCH_CANDIDATES_MAX: usize = 64;
 /// runs the shadow ray's own tests against the gathered occluders only, so
 /// every answer is the one [`visible`](Visibility::visible) gives. Past
 /// [`BATCH_CANDIDATES_MAX`] occluders the rays are cast one by one.
+///
+/// # Candidate lists
+///
+/// The cut asks about a node only after its parent answered
+/// [`Coverage::Partial`], and casts the rays to a leaf's lights right
+/// after the leaf did. So for the current apex (a shading point, or a
+/// group's box) the host keeps the occluders gathered for each partial
+/// node's shaft, its *candidate list* (Haines and Wallace's term): every
+/// occluder whose box meets the shaft grown by the margin (of a solid's
+/// part that meets the apex's box, each member that does), less the
+/// triangles that every segment leaves behind within the offset, up to
+/// [`CANDIDATES_MAX`](crate::CANDIDATES_MAX) of them. If a node's box lies
+/// inside a listed box, every segment from the apex to it is a segment to
+/// the listed box, so no occluder off the list can meet one in its tests.
+/// Hence:
+///
+/// * a node inside a listed box is classified from the smallest such list
+///   (found down the tree the lists form by containment) rather than the
+///   BVH: the single blocker is looked for along the list, and the node's
+///   own list is the parent's filtered by its shaft;
+/// * the lights of a leaf inside a listed box of at most
+///   [`BATCH_CANDIDATES_MAX`] occluders are tested against that list, each
+///   ray with its own tests, so every answer is the one
+///   [`visible`](Visibility::visible) gives; the occluder that blocks a ray
+///   moves to the front of the list, where the next light's ray tries it
+///   first (neighbouring lights hide behind the same building).
+///
+/// The lists are dropped when the apex changes, except a group's while the
+/// apex is a point inside the group's box: every segment from the point
+/// is one from the group's box, so the group's lists serve the point too
+/// (the batch call asks about a group's nodes, then about the nodes below
+/// those for each of its points). Where the shafts of small nodes keep
+/// meeting more occluders than a batch of rays tests (foliage:
+/// [`GIVE_UP_CROWDED`](crate::GIVE_UP_CROWDED)), the host stops gathering
+/// lists for the apex and classifies from the BVH, as without lists.
 #[derive(Clone, Debug)]
 pub struct Shadows<'o> {
     occluders: &'o Occluders,
@@ -105,9 +145,14 @@ pub struct Shadows<'o> {
     /// Of [`rays`](Self::rays), those answered in batches against gathered
     /// occluders (see "Batches of shadow rays").
     pub batched: u64,
+    /// Classifications answered from a candidate list rather than the BVH
+    /// (see "Candidate lists").
+    pub listed: u64,
     /// The occluders' slots a batch of shadow rays tests: scratch space,
     /// kept between calls so that a warmed host allocates nothing.
     candidates: Vec<u32>,
+    /// The candidate lists of the current apex.
+    lists: Lists,
 }
 
 impl<'o> Shadows<'o> {
@@ -118,7 +163,9 @@ impl<'o> Shadows<'o> {
             answers: [0; 3],
             rays: 0,
             batched: 0,
+            listed: 0,
             candidates: Vec::new(),
+            lists: Lists::default(),
         }
     }
 
@@ -136,7 +183,14 @@ impl<'o> Shadows<'o> {
     /// one point, or a group of points) to a point of `target`: see the
     /// type's documentation, "Classification".
     pub fn classify_boxes(&mut self, from: &Aabb, target: &Aabb) -> Coverage {
-        let coverage = self.classification(from, target);
+        self.classify_counted(from, target, true)
+    }
+
+    /// [`classify_boxes`](Self::classify_boxes), `small` saying whether
+    /// `target` is a small node's box (see
+    /// [`GIVE_UP_CROWDED`](crate::GIVE_UP_CROWDED)).
+    fn classify_counted(&mut self, from: &Aabb, target: &Aabb, small: bool) -> Coverage {
+        let coverage = self.classification(from, target, small);
         self.answers[coverage as usize] += 1;
         coverage
     }
@@ -203,7 +257,7 @@ impl<'o> Shadows<'o> {
         !crowded
     }
 
-    fn classification(&self, from: &Aabb, target: &Aabb) -> Coverage {
+    fn classification(&mut self, from: &Aabb, target: &Aabb, small: bool) -> Coverage {
         let occ = self.occluders;
         if occ.is_empty() {
             return Coverage::Visible;
@@ -211,14 +265,20 @@ impl<'o> Shadows<'o> {
         let Some((margin, magnitude)) = self.margin(from, target) else {
             return Coverage::Partial;
         };
+        self.lists.aim(from);
+        let gathering = self.lists.gathering();
+        let parent = if gathering {
+            self.lists.find(from, target)
+        } else {
+            None
+        };
+        self.listed += u64::from(parent.is_some());
         let (centre, middle) = (centre(from), centre(target));
+        let listed = parent.map(|list| &self.lists.slots[self.lists.range(list)]);
         let (occluded, centre_blocked) =
-            self.single_blocker(from, target, centre, middle, margin, magnitude);
+            self.single_blocker(from, target, (centre, middle), margin, magnitude, listed);
         if occluded {
             return Coverage::Occluded;
-        }
-        if centre_blocked {
-            return Coverage::Partial;
         }
         let shaft = if from.min == from.max {
             Shaft::new(from.min, target, margin)
@@ -242,7 +302,30 @@ impl<'o> Shadows<'o> {
             }
             _ => member(slot),
         };
-        if occ.bvh.any_in(|b| shaft.meets(b), blocks_some) {
+        if gathering
+            && let Some(gathered) = self.lists.gather(occ, parent, from, &shaft, small, |v| {
+                !clears(v, from, target, t_min_bound, m)
+            })
+        {
+            // Every occluder a segment's test may meet is gathered (see
+            // "Candidate lists"): the node is visible unless one of them
+            // may block a segment, and the list is kept for the node's
+            // children and its lights' shadow rays if it is partial.
+            // (Each gathered occluder meets the shaft.)
+            let may_block = |slot: usize| match occ.prims[slot] {
+                Prim::Part { first, end } => (first as usize..end as usize).any(member),
+                Prim::Triangle { ref v, .. } => !clears(v, from, target, t_min_bound, m),
+                Prim::Box => true,
+            };
+            let slots = &self.lists.slots;
+            if centre_blocked || gathered.clone().any(|at| may_block(slots[at] as usize)) {
+                self.lists.keep(parent, target, gathered);
+                return Coverage::Partial;
+            }
+            self.lists.drop_from(gathered.start);
+            return Coverage::Visible;
+        }
+        if centre_blocked || occ.bvh.any_in(|b| shaft.meets(b), blocks_some) {
             Coverage::Partial
         } else {
             Coverage::Visible
@@ -257,10 +340,10 @@ impl<'o> Shadows<'o> {
         &self,
         from: &Aabb,
         target: &Aabb,
-        centre: Vec3,
-        middle: Vec3,
+        (centre, middle): (Vec3, Vec3),
         margin: f32,
         magnitude: f32,
+        listed: Option<&[u32]>,
     ) -> (bool, bool) {
         let occ = self.occluders;
         let between = Segment::new(centre, middle);
@@ -280,7 +363,14 @@ impl<'o> Shadows<'o> {
         // tried at once (its test is cheap, and in a solid it is the
         // likely blocker), a triangle's test only if no box blocks.
         let mut triangles = [0u32; BLOCKER_CANDIDATES];
+        // The segments from a point apex to the target's corners, set up
+        // once for the boxes tried.
+        let mut fan = None;
         let mut visit = |slot: usize| {
+            // Triangles are tried only while no box is hit (below).
+            if boxes_tried > 0 && matches!(occ.prims[slot], Prim::Triangle { .. }) {
+                return false;
+            }
             // An occluder that blocks every segment blocks the one between
             // the centres: only those are tried, and a quad once.
             if !occ.hits_one(slot, &between, centre, middle, t_min) {
@@ -299,21 +389,36 @@ impl<'o> Shadows<'o> {
                 }
                 _ => {
                     boxes_tried += 1;
-                    occluded = box_blocks(&occ.bounds[slot], from, target, margin, occ.offset);
+                    occluded = box_blocks(
+                        &occ.bounds[slot],
+                        (from, target),
+                        margin,
+                        occ.offset,
+                        &mut fan,
+                    );
                 }
             }
             occluded
                 || (tried == BLOCKER_CANDIDATES
                     && (boxes_tried >= BLOCKER_CANDIDATES || occ.boxes() == 0))
         };
-        occ.bvh.any_along(&between, |slot| match occ.prims[slot] {
+        let mut along = |slot: usize| match occ.prims[slot] {
             // A part's members, its boxes first.
             Prim::Part { first, end } => {
                 between.hits(&occ.bounds[slot]) && (first as usize..end as usize).any(&mut visit)
             }
             _ => visit(slot),
-        });
-        if occluded || !(within && gap > 0.0) {
+        };
+        match listed {
+            // Every occluder the segment may meet is on the list.
+            Some(slots) => {
+                slots.iter().any(|&slot| along(slot as usize));
+            }
+            None => {
+                occ.bvh.any_along(&between, along);
+            }
+        }
+        if occluded || boxes_tried > 0 || !(within && gap > 0.0) {
             return (occluded, centre_blocked);
         }
         let t_min_bound = f64::from(occ.offset) / gap;
@@ -350,7 +455,13 @@ impl<'o> Shadows<'o> {
 /// between the corners of `from` and of `target`, and lies at least twice
 /// `offset` plus `margin` away from `from` (so that every segment meets it
 /// past the offset).
-fn box_blocks(b: &BvhAabb, from: &Aabb, target: &Aabb, margin: f32, offset: f32) -> bool {
+fn box_blocks(
+    b: &BvhAabb,
+    (from, target): (&Aabb, &Aabb),
+    margin: f32,
+    offset: f32,
+    fan: &mut Option<Fan>,
+) -> bool {
     let core = BvhAabb::new(b.min + margin, b.max - margin);
     if !core.valid() {
         return false;
@@ -363,6 +474,11 @@ fn box_blocks(b: &BvhAabb, from: &Aabb, target: &Aabb, margin: f32, offset: f32)
     let touching = away.min.cmple(b.max.into()).all() && Vec3::from(b.min).cmple(away.max).all();
     if touching {
         return false;
+    }
+    if from.min == from.max {
+        return fan
+            .get_or_insert_with(|| Fan::new(from.min, target))
+            .all_meet(&core);
     }
     let ends = distinct_corners(target);
     distinct_corners(from).all(|p| ends.clone().all(|q| Segment::new(p, q).hits(&core)))
@@ -399,12 +515,16 @@ impl Visibility for Shadows<'_> {
             min: point,
             max: point,
         };
-        self.classify_boxes(&from, &node.aabb)
+        self.classify_counted(&from, &node.aabb, node.light_count <= SMALL_NODE_LIGHTS)
     }
 
     /// [`Shadows::classify_boxes`] from the group's box.
     fn classify_group(&mut self, group: &PointGroup, node: &NodeRegion) -> Coverage {
-        self.classify_boxes(&group.aabb, &node.aabb)
+        self.classify_counted(
+            &group.aabb,
+            &node.aabb,
+            node.light_count <= SMALL_NODE_LIGHTS,
+        )
     }
 
     /// One any-hit shadow ray ([`Occluders::blocked`]).
@@ -428,6 +548,33 @@ impl Visibility for Shadows<'_> {
                 max: b.max.max(l),
             },
         );
+        let from = Aabb {
+            min: point,
+            max: point,
+        };
+        if let Some(list) = self.lists.find(&from, &target) {
+            let range = self.lists.range(list);
+            if range.len() <= BATCH_CANDIDATES_MAX {
+                // The list of a box that holds every light (the leaf's
+                // own, just kept) holds every occluder their rays may meet.
+                self.rays += lights.len() as u64;
+                self.batched += lights.len() as u64;
+                let slots = &mut self.lists.slots[range];
+                for (&light, seen) in lights.iter().zip(seen) {
+                    *seen = match occ.blocker_in(slots, point, light) {
+                        None => true,
+                        Some(k) => {
+                            // The next light's ray tries this occluder
+                            // first: neighbouring lights hide behind the
+                            // same building.
+                            slots.swap(0, k);
+                            false
+                        }
+                    };
+                }
+                return;
+            }
+        }
         if occ.is_empty() || lights.len() < 2 || !self.gather(point, &target) {
             for (&light, seen) in lights.iter().zip(seen) {
                 *seen = self.visible(point, light);

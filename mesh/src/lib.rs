@@ -93,6 +93,7 @@
 mod bvh;
 mod error;
 mod host;
+mod lists;
 mod occluders;
 pub mod shaft;
 mod solid;
@@ -101,6 +102,7 @@ mod triangle;
 pub use bvh::corners;
 pub use error::MeshError;
 pub use host::{BATCH_CANDIDATES_MAX, BLOCKER_CANDIDATES, Shadows};
+pub use lists::{CANDIDATES_MAX, GIVE_UP_CROWDED, SMALL_NODE_LIGHTS};
 pub use obvhs;
 pub use occluders::{
     BLOCKER_REACH, DEFAULT_OFFSET_SCALE, MARGIN_ULPS, Occluders, OccludersBuilder,

@@ -542,6 +542,16 @@ impl Occluders {
     /// Whether the shadow ray `segment` (from `from` to `to`, hits counted
     /// from parameter `t_min`) meets the occluder in `slot`.
     #[inline]
+    /// The position in `slots` of the first occluder that blocks the
+    /// segment from `from` to `to` (as [`blocked`](Self::blocked) tests
+    /// it), if one does.
+    pub(crate) fn blocker_in(&self, slots: &[u32], from: Vec3, to: Vec3) -> Option<usize> {
+        let (segment, t_min) = self.shadow_ray(from, to)?;
+        slots
+            .iter()
+            .position(|&slot| self.hits(slot as usize, &segment, from, to, t_min))
+    }
+
     pub(crate) fn hits(
         &self,
         slot: usize,

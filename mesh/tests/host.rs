@@ -242,6 +242,138 @@ proptest! {
     }
 }
 
+/// A box inside `outer`, of a random fraction of its size per axis.
+fn inside(rng: &mut Rng, outer: &Aabb) -> Aabb {
+    let size = outer.max - outer.min;
+    let part = Vec3::new(
+        rng.range(0.2, 0.7),
+        rng.range(0.2, 0.7),
+        rng.range(0.2, 0.7),
+    ) * size;
+    let min = outer.min + (size - part) * Vec3::new(rng.unit(), rng.unit(), rng.unit());
+    Aabb {
+        min,
+        max: (min + part).min(outer.max),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// As the cut asks: from one point (in free space or on a surface),
+    /// boxes inside boxes that answered partial, down to a leaf whose
+    /// lights then get their shadow rays in a batch; half the time after a
+    /// group around the point did the same. The host answers the
+    /// inner boxes and the rays from the occluders it listed for the outer
+    /// ones; every answer agrees with the shadow rays, and every batched
+    /// ray with a single ray through the BVH.
+    #[test]
+    fn nested_answers_agree_with_rays(seed in any::<u64>()) {
+        let mut rng = Rng::new(seed);
+        let (mesh, _) = buildings(&mut rng, 3, 6.0);
+        let triangles: Vec<[Vec3; 3]> = mesh
+            .indices
+            .chunks_exact(3)
+            .map(|t| [0, 1, 2].map(|k| mesh.positions[t[k] as usize]))
+            .collect();
+        let occluders = match rng.below(3) {
+            0 => Occluders::builder().triangles(&triangles).unwrap().build(),
+            1 => Occluders::builder().solid(&mesh.positions, &mesh.indices).unwrap().build(),
+            _ => scene(&mut rng),
+        };
+        let mut host = occluders.host();
+        for _ in 0..8 {
+            let point = if rng.below(2) == 0 {
+                on_surface(&mut rng, &occluders, &triangles).0
+            } else {
+                rng.vec(-12.0, 12.0)
+            };
+            let from = Aabb { min: point, max: point };
+            let mut target = rng.boxed(12.0, 8.0, 0.5);
+            if rng.below(2) == 0 {
+                // First a group around the point, as the batch call asks,
+                // down a few boxes while it answers partial: its lists
+                // then serve the point.
+                let group = Aabb { min: point - rng.vec(0.0, 1.0), max: point + rng.vec(0.0, 1.0) };
+                for _ in 0..3 {
+                    let coverage = host.classify_boxes(&group, &target);
+                    let starts = box_points(&mut rng, &group, 2, 4);
+                    let ends = box_points(&mut rng, &target, 3, 8);
+                    prop_assert!(
+                        agrees(&mut host, &starts, &ends, coverage),
+                        "{coverage:?} for {target:?} from {group:?}"
+                    );
+                    if coverage != Coverage::Partial {
+                        break;
+                    }
+                    target = inside(&mut rng, &target);
+                }
+            }
+            for _ in 0..6 {
+                let coverage = host.classify_boxes(&from, &target);
+                let ends = box_points(&mut rng, &target, 3, 16);
+                prop_assert!(
+                    agrees(&mut host, &[point], &ends, coverage),
+                    "{coverage:?} for {target:?} from {point}"
+                );
+                if coverage != Coverage::Partial {
+                    break;
+                }
+                if rng.below(3) == 0 {
+                    // A leaf: its lights' rays, batched.
+                    let lights: Vec<Vec3> = (0..2 + rng.below(31)).map(|_| rng.in_box(&target)).collect();
+                    let mut seen = vec![false; lights.len()];
+                    host.visible_lights(point, &lights, &mut seen);
+                    for (&light, &seen) in lights.iter().zip(&seen) {
+                        prop_assert_eq!(seen, !occluders.blocked(point, light), "{} to {}", point, light);
+                    }
+                    break;
+                }
+                target = inside(&mut rng, &target);
+            }
+        }
+    }
+}
+
+/// From a point the host answers boxes inside a partial box from the
+/// occluders it listed for it, and the nested descents see all three
+/// answers.
+#[test]
+fn nested_descents_use_candidate_lists() {
+    let (mut answers, mut listed) = ([0u64; 3], 0);
+    for seed in 0..200 {
+        let mut rng = Rng::new(seed);
+        let (mesh, _) = buildings(&mut rng, 3, 6.0);
+        let occluders = Occluders::builder()
+            .solid(&mesh.positions, &mesh.indices)
+            .unwrap()
+            .build();
+        let mut host = occluders.host();
+        let point = rng.vec(-12.0, 12.0) * Vec3::new(1.0, 1.0, 0.0);
+        let from = Aabb {
+            min: point,
+            max: point,
+        };
+        let mut target = rng.boxed(12.0, 8.0, 0.5);
+        for _ in 0..12 {
+            if host.classify_boxes(&from, &target) != Coverage::Partial {
+                break;
+            }
+            target = inside(&mut rng, &target);
+        }
+        for (total, answered) in answers.iter_mut().zip(host.answers) {
+            *total += answered;
+        }
+        listed += host.listed;
+    }
+    assert!(answers.iter().all(|&a| a > 0), "{answers:?}");
+    let asked: u64 = answers.iter().sum();
+    assert!(
+        listed > asked / 4,
+        "{listed} of {asked} answered from lists"
+    );
+}
+
 /// A point on a wall sees a node in front of the wall as visible (the
 /// wall, its own surface, cannot block a ray past the offset), from a
 /// point and from a patch of the wall; a node in the wall's plane is not
