@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use glam::{Vec3, Vec3A, Vec4};
+use glam::{Vec3, Vec3A};
 use manylights::Aabb;
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb as BvhAabb;
@@ -56,50 +56,6 @@ impl Segment {
         let near = t0.min(t1).max_element();
         let far = t0.max(t1).min_element();
         near <= far && far >= t_min && near <= 1.0
-    }
-}
-
-/// The segments from a point to the eight corners of a box, set up for
-/// slab tests four at a time.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Fan {
-    from: Vec3A,
-    /// Per axis, `1 / (corner - from)` of corners 0-3 and 4-7 (in the order
-    /// of [`corners`]).
-    inv_dir: [[Vec4; 2]; 3],
-}
-
-impl Fan {
-    /// The segments from `from` to the corners of `target`.
-    #[inline]
-    pub fn new(from: Vec3, target: &Aabb) -> Fan {
-        let (lo, hi) = (target.min - from, target.max - from);
-        let x = Vec4::new(lo.x, hi.x, lo.x, hi.x).recip();
-        let y = Vec4::new(lo.y, lo.y, hi.y, hi.y).recip();
-        Fan {
-            from: from.into(),
-            inv_dir: [
-                [x, x],
-                [y, y],
-                [Vec4::splat(lo.z).recip(), Vec4::splat(hi.z).recip()],
-            ],
-        }
-    }
-
-    /// Whether every segment meets the closed box `b`: per segment the slab
-    /// test of [`Segment::hits`], four lanes at a time.
-    #[inline]
-    pub fn all_meet(&self, b: &BvhAabb) -> bool {
-        let (lo, hi) = (b.min - self.from, b.max - self.from);
-        (0..2).all(|h| {
-            let t = |axis: usize, v: Vec3A| Vec4::splat(v[axis]) * self.inv_dir[axis][h];
-            let (x0, x1) = (t(0, lo), t(0, hi));
-            let (y0, y1) = (t(1, lo), t(1, hi));
-            let (z0, z1) = (t(2, lo), t(2, hi));
-            let near = x0.min(x1).max(y0.min(y1)).max(z0.min(z1));
-            let far = x0.max(x1).min(y0.max(y1)).min(z0.max(z1));
-            (near.cmple(far) & far.cmpge(Vec4::ZERO) & near.cmple(Vec4::ONE)).all()
-        })
     }
 }
 

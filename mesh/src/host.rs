@@ -4,10 +4,10 @@ use glam::{DVec3, Vec3};
 use manylights::{Aabb, Coverage, NodeRegion, PointGroup, Visibility};
 use obvhs::aabb::Aabb as BvhAabb;
 
-use crate::bvh::{Fan, Segment, distinct_corners};
+use crate::bvh::{Segment, distinct_corners};
 use crate::lists::{Lists, SMALL_NODE_LIGHTS};
 use crate::occluders::{BLOCKER_REACH, MARGIN_ULPS, NO_PARTNER, Occluders, Prim};
-use crate::shaft::Shaft;
+use crate::shaft::{Fan, Shaft};
 use crate::triangle::{blocks, clears};
 
 /// Occluders tried as the single blocker of a node: the first few boxes,
