@@ -152,13 +152,18 @@ impl Shaft {
                 let (lo, hi) = (Vec2::new(r.min[i], r.min[j]), Vec2::new(r.max[i], r.max[j]));
                 [lo, Vec2::new(hi.x, lo.y), hi, Vec2::new(lo.x, hi.y)]
             };
-            let mut points: Vec<(Vec2, bool)> = rect(a)
-                .into_iter()
-                .map(|p| (p, false))
-                .chain(rect(b).into_iter().map(|p| (p, true)))
-                .collect();
-            let all: Vec<Vec2> = points.iter().map(|p| p.0).collect();
-            for (p, q) in hull(&mut points) {
+            let (ra, rb) = (rect(a), rect(b));
+            let mut points: [(Vec2, bool); 8] = std::array::from_fn(|k| {
+                if k < 4 {
+                    (ra[k], false)
+                } else {
+                    (rb[k - 4], true)
+                }
+            });
+            let all = points.map(|p| p.0);
+            let (chain, len) = hull(&mut points);
+            for k in 0..len {
+                let (p, q) = (chain[k], chain[(k + 1) % len]);
                 if p.1 == q.1 {
                     continue; // an edge of one rectangle: the bounding box holds it
                 }
@@ -272,32 +277,29 @@ fn silhouettes(q: [Vec4; 2], lo: [Vec4; 2], hi: [Vec4; 2], margin: f32) -> [[Vec
     })
 }
 
-/// The edges of the convex hull of `points` (each tagged), counter-clockwise
-/// (Andrew's monotone chain; collinear points dropped).
-fn hull(points: &mut [(Vec2, bool)]) -> Vec<((Vec2, bool), (Vec2, bool))> {
+/// The convex hull of `points` (each tagged), counter-clockwise (Andrew's
+/// monotone chain; collinear points dropped): its first `len` vertices, an
+/// edge from each to the next (the last to the first). No allocation: a
+/// shaft between two boxes is built per classification.
+fn hull(points: &mut [(Vec2, bool); 8]) -> ([(Vec2, bool); 17], usize) {
+    // (A stable sort of 8 elements sorts in place.)
     points.sort_by(|a, b| a.0.x.total_cmp(&b.0.x).then(a.0.y.total_cmp(&b.0.y)));
     let cross = |o: Vec2, a: Vec2, b: Vec2| (a - o).perp_dot(b - o);
-    let mut chain: Vec<(Vec2, bool)> = Vec::with_capacity(2 * points.len());
+    let mut chain = [(Vec2::ZERO, false); 17];
+    let mut len = 0;
     for pass in 0..2 {
-        let start = chain.len();
-        let ordered: Box<dyn Iterator<Item = &(Vec2, bool)>> = if pass == 0 {
-            Box::new(points.iter())
-        } else {
-            Box::new(points.iter().rev())
-        };
-        for &p in ordered {
-            while chain.len() >= start + 2
-                && cross(chain[chain.len() - 2].0, chain[chain.len() - 1].0, p.0) <= 0.0
-            {
-                chain.pop();
+        let start = len;
+        for k in 0..points.len() {
+            let p = points[if pass == 0 { k } else { points.len() - 1 - k }];
+            while len >= start + 2 && cross(chain[len - 2].0, chain[len - 1].0, p.0) <= 0.0 {
+                len -= 1;
             }
-            chain.push(p);
+            chain[len] = p;
+            len += 1;
         }
-        chain.pop(); // the last point starts the other half
+        len -= 1; // the last point starts the other half
     }
-    (0..chain.len())
-        .map(|k| (chain[k], chain[(k + 1) % chain.len()]))
-        .collect()
+    (chain, len)
 }
 
 #[cfg(test)]
