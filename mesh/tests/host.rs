@@ -196,6 +196,17 @@ fn on_surface(rng: &mut Rng, occluders: &Occluders, triangles: &[[Vec3; 3]]) -> 
     )
 }
 
+/// A grid of buildings (a closed mesh), and its triangles.
+fn city(rng: &mut Rng) -> (Mesh, Vec<[Vec3; 3]>) {
+    let (mesh, _) = buildings(rng, 3, 6.0);
+    let triangles = mesh
+        .indices
+        .chunks_exact(3)
+        .map(|t| [0, 1, 2].map(|k| mesh.positions[t[k] as usize]))
+        .collect();
+    (mesh, triangles)
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
 
@@ -205,12 +216,7 @@ proptest! {
     #[test]
     fn answers_from_surfaces_agree_with_rays(seed in any::<u64>()) {
         let mut rng = Rng::new(seed);
-        let (mesh, _) = buildings(&mut rng, 3, 6.0);
-        let triangles: Vec<[Vec3; 3]> = mesh
-            .indices
-            .chunks_exact(3)
-            .map(|t| [0, 1, 2].map(|k| mesh.positions[t[k] as usize]))
-            .collect();
+        let (mesh, triangles) = city(&mut rng);
         let occluders = if rng.below(2) == 0 {
             Occluders::builder().triangles(&triangles).unwrap().build()
         } else {
@@ -270,12 +276,7 @@ proptest! {
     #[test]
     fn nested_answers_agree_with_rays(seed in any::<u64>()) {
         let mut rng = Rng::new(seed);
-        let (mesh, _) = buildings(&mut rng, 3, 6.0);
-        let triangles: Vec<[Vec3; 3]> = mesh
-            .indices
-            .chunks_exact(3)
-            .map(|t| [0, 1, 2].map(|k| mesh.positions[t[k] as usize]))
-            .collect();
+        let (mesh, triangles) = city(&mut rng);
         let occluders = match rng.below(3) {
             0 => Occluders::builder().triangles(&triangles).unwrap().build(),
             1 => Occluders::builder().solid(&mesh.positions, &mesh.indices).unwrap().build(),
