@@ -51,7 +51,15 @@ pub(crate) fn settle_point<S: Shader, V: Visibility>(
     let emitters = tree
         .is_oriented()
         .then(super::point::EmitterScratch::default);
-    let mut region = Point::new(shader, surface, point, threshold, None, emitters.as_ref());
+    let mut region = Point::new(
+        tree,
+        shader,
+        surface,
+        point,
+        threshold,
+        None,
+        emitters.as_ref(),
+    );
     region.coarse = None;
     let mut cut = Cut::new(tree, shader, region, threshold, visibility);
     cut.enter_root(list, None);

@@ -28,14 +28,16 @@ use super::engine::{Cut, Pending, Region, node_region};
 use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::interpolate::{Nesting, Ramp, level};
 use super::point::reported_bound;
-use super::policy::{ENTRIES_PER_BOUND, MAX_SHARED_ENTRIES};
+use super::policy::{ENTRIES_PER_BOUND, LAYER_NODES_MAX, MAX_SHARED_ENTRIES};
 use super::steering::{SAMPLES, Samples, Spread, darkest};
 use super::threshold::Threshold;
 use crate::emission::Profile;
-use crate::geometry::{Aabb, Cone, GroupBounds, GroupView, Side};
+use crate::geometry::{Aabb, Cone, GroupBounds, GroupView, Side, Surface};
+use crate::lambert::slabs_apply;
 use crate::numeric::{CompensatedSum, POINT_SLACK, SERIES_SLACK};
 use crate::shader::{Seal, Shader};
 use crate::tree::orientation::Factor;
+use crate::tree::slabs::SLAB_MIN_LIGHTS;
 use crate::tree::{LightTree, MAX_CHILDREN, Node};
 use crate::visibility::{Coverage, NodeRegion, Visibility};
 
@@ -108,6 +110,14 @@ pub(crate) struct Shared<'s> {
     points: u64,
     /// What the cut may cost per point.
     budget_per_point: u64,
+    /// A point at the group's centre with its mean normal, where the
+    /// shader narrows bounds from slab moments: the shared cut gives up
+    /// once [`LAYER_NODES_MAX`] of its nodes are cut by that point's tangent
+    /// plane with bins wholly above or below it (a point alone settles
+    /// those nodes early; the shared cut would walk them to the leaves).
+    layer_probe: Option<Surface>,
+    /// The nodes met so far that [`layer_probe`](Self::layer_probe) counts.
+    layer_nodes: u32,
     scratch: &'s mut GroupScratch,
 }
 
@@ -148,8 +158,17 @@ impl<'s> Shared<'s> {
             spread: Spread::default(),
             points: spend.points,
             budget_per_point: spend.per_point,
+            layer_probe: None,
+            layer_nodes: 0,
             scratch,
         }
+    }
+
+    /// Watch for nodes the group's tangent planes cut through a layer of
+    /// lights (see [`layer_probe`](Self::layer_probe)).
+    pub(crate) fn watch_layers(&mut self) {
+        let g = &self.group;
+        self.layer_probe = Surface::new(g.centre.as_vec3(), g.normal.as_vec3(), None).ok();
     }
 
     /// The emission bounds of node `index` over the group
@@ -506,7 +525,9 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
         let rays = scratch.shadowed.len() as u64 * region.points;
         let cost =
             u64::from(cut.work.nodes) + rays + entries as u64 * region.points / ENTRIES_PER_BOUND;
-        cost <= region.points * region.budget_per_point && entries <= MAX_SHARED_ENTRIES
+        cost <= region.points * region.budget_per_point
+            && entries <= MAX_SHARED_ENTRIES
+            && region.layer_nodes < LAYER_NODES_MAX
     }
 
     #[inline(always)]
@@ -655,6 +676,12 @@ impl<'s, S: Shader, V: Visibility> Cut<'_, S, V, Shared<'s>> {
     #[inline(always)]
     fn shared_entry(&mut self, index: usize, visible: bool, error: Option<DVec3>) -> Option<Entry> {
         let node = &self.tree.nodes[index];
+        if node.light_count >= SLAB_MIN_LIGHTS
+            && let Some(probe) = &self.region.layer_probe
+            && slabs_apply(probe, self.tree, index)
+        {
+            self.region.layer_nodes += 1;
+        }
         let visible = self.ask(visible, &node_region(node, index), Some(node))?;
         Some(match error.filter(|_| visible) {
             Some(error) => Entry::new(

@@ -21,6 +21,7 @@ use crate::lambert::diffuse_lobe_bound;
 use crate::numeric::{CompensatedSum, SUM_SLACK};
 use crate::shader::{ChildrenOf, NodeEstimate, Seal, Shader};
 use crate::tree::orientation::Factor;
+use crate::tree::slabs::SLAB_MIN_LIGHTS;
 use crate::tree::{LightTree, NO_PLANE, Node};
 use crate::visibility::Visibility;
 
@@ -42,6 +43,11 @@ pub(crate) struct Point<'a, S: Shader> {
     /// sum (a target of 0, see [`Threshold::zero`]) rather than a few at a
     /// time.
     pub(crate) one_by_one: bool,
+    /// Whether node bounds are narrowed from the tree's slab moments
+    /// ([`Shader::narrow_bound`]): where the shader does, but not with
+    /// interpolation, whose blend needs estimates continuous in the point
+    /// (the slab interval changes where a bin crosses the tangent plane).
+    slabs: bool,
     /// The share of a coarse sum its error may be for the sum to be kept
     /// (`1/32` of a relative target), or `None` where coarse sums are not
     /// used; where they are, children are bounded coarsely too.
@@ -157,6 +163,7 @@ impl<'a, S: Shader> Point<'a, S> {
     /// emitters, else `None`.
     #[inline(always)]
     pub(crate) fn new(
+        tree: &LightTree,
         shader: &S,
         surface: &'a Surface,
         point: Vec3,
@@ -179,6 +186,9 @@ impl<'a, S: Shader> Point<'a, S> {
                 NEAR_NODE_LIGHTS
             },
             one_by_one: threshold.is_zero(),
+            slabs: !interpolating
+                && shader.narrows_with_slabs(Seal)
+                && slabs_may_apply(tree, surface),
             coarse: coarse_share(threshold),
             small_lanes,
             settled: CompensatedSum::default(),
@@ -188,6 +198,44 @@ impl<'a, S: Shader> Point<'a, S> {
             children: Children::default(),
             emitters,
         }
+    }
+}
+
+/// Whether slab moments may narrow any node's bound for this point: the
+/// tree has some, the tangent plane runs through the root's box (else it
+/// runs through no node's), and the normal is not perpendicular to every
+/// axis the bins slice (else no bin lies wholly above or below the plane).
+fn slabs_may_apply(tree: &LightTree, surface: &Surface) -> bool {
+    let slabs = &tree.slabs;
+    let Some(root) = tree.nodes.first() else {
+        return false;
+    };
+    let n = surface.normal;
+    let across = (0..3).any(|a| slabs.axes & (1 << a) != 0 && n[a] != 0.0);
+    across && box_may_be_cut(n.as_vec3(), surface.point.as_vec3(), root)
+}
+
+/// Whether the plane through `point` with normal `n` may run through
+/// `node`'s box, judged in `f32` with a margin (a node wrongly judged uncut
+/// only keeps its bound; [`Shader::narrow_bound`] decides in `f64`).
+#[inline(always)]
+fn box_may_be_cut(n: Vec3, point: Vec3, node: &Node) -> bool {
+    let (lo, hi) = (node.aabb.min, node.aabb.max);
+    let offset = (lo + hi) * 0.5 - point;
+    let half = (hi - lo) * 0.5;
+    let middle = n.dot(offset);
+    let reach = n.abs().dot(half);
+    let margin = 1e-5 * (offset.abs().max_element() + half.max_element());
+    middle.abs() <= reach + margin
+}
+
+impl<S: Shader> Point<'_, S> {
+    /// Whether the tangent plane may run through `node`'s box, judged in
+    /// `f32` with a margin (a node wrongly judged uncut only keeps its
+    /// bound; [`Shader::narrow_bound`] decides in `f64`).
+    #[inline(always)]
+    fn may_cut(&self, node: &Node) -> bool {
+        box_may_be_cut(self.surface.normal.as_vec3(), self.point, node)
     }
 }
 
@@ -537,6 +585,18 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
         weight: f64,
         bound: &NodeEstimate,
     ) -> Option<Entry> {
+        let narrowed;
+        let node = &self.tree.nodes[index];
+        let bound = if self.region.slabs
+            && node.light_count >= SLAB_MIN_LIGHTS
+            && !self.tree.slabs.tables.is_empty()
+            && self.region.may_cut(node)
+        {
+            narrowed = self.narrow(index, bound);
+            &narrowed
+        } else {
+            bound
+        };
         let over = self
             .max_contribution
             .is_some_and(|m| bound.upper.max_element() > m);
@@ -553,6 +613,21 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
             return None;
         }
         Some(entry)
+    }
+
+    /// [`Shader::narrow_bound`] of node `index`'s `bound`, out of the
+    /// cut's hot loop.
+    #[inline(never)]
+    fn narrow(&self, index: usize, bound: &NodeEstimate) -> NodeEstimate {
+        let region = &self.region;
+        self.shader.narrow_bound(
+            Seal,
+            &region.per_point,
+            region.surface,
+            self.tree,
+            index,
+            *bound,
+        )
     }
 
     /// Bounds the nodes waiting in the region's children together
@@ -713,6 +788,7 @@ pub(crate) fn shade_point<S: Shader, V: Visibility>(
     // Set up only for a tree of emitters.
     let emitters = tree.is_oriented().then(EmitterScratch::default);
     let region = Point::new(
+        tree,
         shader,
         surface,
         point,

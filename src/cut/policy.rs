@@ -126,3 +126,13 @@ pub(crate) fn is_near(node: &Node, distance_sq: f64) -> bool {
     let r = f64::from(node.radius);
     f64::from(node.light_count) * distance_sq <= NEAR_NODE_REACH * r * r
 }
+
+/// A group's shared cut gives up (its points are shaded one by one) once
+/// this many of its nodes are cut by the tangent plane at the group's
+/// centre with some of their slab bins wholly above or below it, where the
+/// shader narrows point bounds from slab moments: a point alone settles
+/// such nodes at the level their distance allows, the shared cut (whose
+/// group bounds do not read the bins) would refine them to the leaves.
+/// Few enough to stop before the shared cut has spent much; more than one,
+/// so that a group barely touching a layer still shares.
+pub(crate) const LAYER_NODES_MAX: u32 = 4;

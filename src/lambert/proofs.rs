@@ -17,6 +17,12 @@
 //! plane, by at most the clamp term `I_k depth / (D - R)^3` per channel
 //! (or, in `f64`, `I_k min(depth, chord_k) / (D - R)^3`: see the chord in
 //! [`Lambert`]'s docs).
+//! The slab bound for nodes the tangent plane cuts (convexity of `h^+` on
+//! each cut slice, and a second-order expansion of `|x - p|^-3` under the
+//! non-negative weights `I_ik h_i` of the slices wholly above) is derived in
+//! full in [`Lambert`]'s docs, "Nodes the tangent plane cuts", and coded in
+//! `slab`.
+//!
 //! Every bound below holds per channel `k` whenever the node's cone exists
 //! (`D - R > D * MIN_CLEARANCE`, see [`Cone::new`]), for any unit normal,
 //! including nodes that straddle the tangent plane.

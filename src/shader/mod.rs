@@ -363,6 +363,37 @@ pub trait Shader {
         false
     }
 
+    /// Whether [`narrow_bound`](Self::narrow_bound) narrows bounds from the
+    /// tree's slab moments (the default: no).
+    #[inline]
+    #[doc(hidden)]
+    fn narrows_with_slabs(&self, _: Seal) -> bool {
+        false
+    }
+
+    /// `bound`, a certified bound of node `index` of `tree` from this
+    /// point, narrowed where the shader can narrow it from what the tree
+    /// keeps beside its nodes; the default returns it unchanged.
+    /// [`Lambert`] narrows the bound of a large node that the tangent plane
+    /// runs through from the node's slab moments (see its docs, "Nodes the
+    /// tangent plane cuts").
+    ///
+    /// [`Lambert`]: crate::Lambert
+    #[inline]
+    #[doc(hidden)]
+    fn narrow_bound(
+        &self,
+        _: Seal,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        tree: &crate::LightTree,
+        index: usize,
+        bound: NodeEstimate,
+    ) -> NodeEstimate {
+        let _ = (point, surface, tree, index);
+        bound
+    }
+
     /// The albedo `kd` if this shader is exactly diffuse reflection: if
     /// [`eval`](Self::eval) is [`Lambert`](crate::Lambert)'s term with this
     /// albedo (up to rounding), whatever the view: the batch call then

@@ -191,6 +191,8 @@ impl TreeBuilder {
             .profiles
             .extend(order.iter().map(|&k| profiles[k as usize]));
         tree.orientation = Some(orientation);
+        // The slab bound is for isotropic lights.
+        tree.slabs.clear();
         tree.fill_cones();
         Ok(())
     }
@@ -267,6 +269,7 @@ impl TreeBuilder {
             groups: Default::default(),
             options: *self,
             orientation: None,
+            slabs: Default::default(),
         };
         self.build_into(&mut tree, lights, None, pool)?;
         Ok(tree)
@@ -313,6 +316,7 @@ impl TreeBuilder {
             tree.order.clear();
             tree.planes.clear();
             tree.node_planes.clear();
+            tree.slabs.clear();
             tree.groups.refill_from_notes(&[], &mut [], Pool::ONE);
             return Ok(());
         }

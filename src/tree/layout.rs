@@ -37,6 +37,9 @@ pub struct LightTree {
     /// `None` for a tree of isotropic lights, which stores nothing for
     /// them.
     pub(crate) orientation: Option<Box<super::orientation::Orientation>>,
+    /// The large nodes' slab moments (see [`slabs`](super::slabs)); empty
+    /// for a tree of oriented emitters.
+    pub(crate) slabs: super::slabs::Slabs,
 }
 
 /// A node whose lights are not known to lie in one plane.
@@ -118,8 +121,8 @@ impl LightTree {
     }
 
     /// Heap memory held by the tree, in bytes (nodes, lights, index map,
-    /// and the nodes' statistics copied side by side for bounding a node's
-    /// children together).
+    /// the nodes' statistics copied side by side for bounding a node's
+    /// children together, and the large nodes' slab moments).
     pub fn memory_bytes(&self) -> usize {
         self.nodes.capacity() * size_of::<Node>()
             + self.lights.capacity() * size_of::<PointLight>()
@@ -127,6 +130,7 @@ impl LightTree {
             + self.planes.capacity() * size_of::<[u32; 3]>()
             + self.node_planes.capacity() * size_of::<u32>()
             + self.groups.memory_bytes()
+            + self.slabs.memory_bytes()
             + self.orientation.as_ref().map_or(0, |o| {
                 size_of::<super::orientation::Orientation>() + o.memory_bytes()
             })

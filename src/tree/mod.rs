@@ -21,6 +21,8 @@
 //! * [`orientation`]: the lights' emission profiles and each node's bound
 //!   on its members' axes;
 //! * [`plane`]: nodes whose lights lie exactly in one tilted plane;
+//! * [`slabs`]: the large nodes' moments in slices across their thinnest
+//!   axis;
 //! * [`statistics_pass`]: every node's statistics, bottom-up, and what
 //!   follows from them;
 //! * [`build`], [`refit`] and [`validate`]: the tree's constructors, its
@@ -44,6 +46,7 @@ mod pool;
 mod prefetch;
 mod radix;
 mod refit;
+pub(crate) mod slabs;
 mod statistics_pass;
 mod validate;
 

@@ -58,6 +58,9 @@ pub struct TreeBuilder {
     /// Whether oriented emitters are split by axis first (see
     /// [`group_by_axis`](Self::group_by_axis)).
     pub(super) group_by_axis: bool,
+    /// Whether large nodes keep slab moments (see
+    /// [`slab_moments`](Self::slab_moments)).
+    pub(super) slab_moments: bool,
 }
 
 impl Default for TreeBuilder {
@@ -85,6 +88,7 @@ impl TreeBuilder {
             max_leaf_lights: 32,
             max_depth: 64,
             group_by_axis: true,
+            slab_moments: true,
         }
     }
 
@@ -116,6 +120,25 @@ impl TreeBuilder {
     /// isotropic lights are never split by axis.
     pub const fn group_by_axis(mut self, yes: bool) -> Self {
         self.group_by_axis = yes;
+        self
+    }
+
+    /// Whether each node of at least 64 isotropic lights keeps its lights'
+    /// moments in 16 slices across the thinnest axis of its box (default:
+    /// yes).
+    ///
+    /// They bound a node that a shading point's tangent plane runs through
+    /// (a roof among street lamps at its height, a floor among floor-level
+    /// lights) at the level its distance allows, where the node's moments
+    /// alone leave the cut to walk down to the leaves; see
+    /// [`Lambert`](crate::Lambert)'s docs, "Nodes the tangent plane cuts".
+    /// They cost about 2.5 KiB per such node (the build table of `cargo
+    /// run --release -p manylights-report -- bounds` prints a tree's memory
+    /// per light) and a pass over those nodes' lights at build and refit.
+    /// Scenes whose points never have lights around their tangent plane
+    /// can leave them out; trees of oriented emitters never keep them.
+    pub const fn slab_moments(mut self, yes: bool) -> Self {
+        self.slab_moments = yes;
         self
     }
 }

@@ -29,6 +29,7 @@ pub(super) fn fill_nodes(tree: &mut LightTree, pool: Pool) {
     let mut notes = fill_statistics(tree, pool);
     record_planes(tree, &notes, pool.cheap(tree.lights.len()));
     tree.groups.refill_from_notes(&tree.nodes, &mut notes, pool);
+    super::slabs::fill_slabs(tree, pool);
 }
 
 /// Computes every node's statistics from the lights, in time linear in

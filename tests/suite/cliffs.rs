@@ -383,3 +383,46 @@ fn a_batch_among_lights_in_its_tangent_plane_costs_about_its_points_alone() {
         "the batch took {batch} evaluations, its points alone {alone} ({stats:?})"
     );
 }
+
+/// Roofs among street lamps at their height (the street city of 10^5
+/// lights, points 5.5 to 6.5 units up, normal up): the tangent plane runs
+/// through the layer of lamps. With the nodes' slab moments (the default)
+/// such a point costs within a few times a ground point's evaluations;
+/// without them, many times more.
+#[test]
+fn roofs_inside_a_layer_of_lamps_cost_about_what_the_ground_costs() {
+    let lights = manylights_report::scenes::city_lights(100_000, 1998);
+    let tree = LightTree::build(&lights).expect("valid lights");
+    let plain = manylights::TreeBuilder::new()
+        .slab_moments(false)
+        .build(&lights)
+        .expect("valid lights");
+    assert!(tree.memory_bytes() > plain.memory_bytes());
+    let mut u = uniforms(6);
+    let (mut ground, mut roofs, mut roofs_plain) = (0u64, 0u64, 0u64);
+    let target = Threshold::relative(0.01);
+    for _ in 0..24 {
+        let (x, y) = (50.0 + 1_100.0 * u(), 50.0 + 1_100.0 * u());
+        let z = 5.5 + u();
+        let mut s = tree.shading(Lambert::new(Vec3::ONE));
+        let on_ground = s.shade(Vec3::new(x, y, 0.0), Vec3::Z, target).unwrap();
+        let roof = Vec3::new(x, y, z);
+        let r = s.shade(roof, Vec3::Z, target).unwrap();
+        let exact = s.exact(roof, Vec3::Z).unwrap();
+        assert!(r.certifies(exact), "{roof}: {r:?} against {exact}");
+        let mut p = plain.shading(Lambert::new(Vec3::ONE));
+        let q = p.shade(roof, Vec3::Z, target).unwrap();
+        assert!(q.certifies(exact));
+        ground += u64::from(on_ground.cost());
+        roofs += u64::from(r.cost());
+        roofs_plain += u64::from(q.cost());
+    }
+    assert!(
+        roofs <= 4 * ground,
+        "roofs {roofs} evaluations against {ground} on the ground"
+    );
+    assert!(
+        4 * roofs <= roofs_plain,
+        "roofs {roofs} evaluations against {roofs_plain} without slab moments"
+    );
+}

@@ -226,7 +226,10 @@ impl<S: Shader> Shading<'_, S> {
             points: members.len() as u64,
             per_point: budget_per_point,
         };
-        let region = Shared::new(kd, group, samples, spend, &mut scratch.group);
+        let mut region = Shared::new(kd, group, samples, spend, &mut scratch.group);
+        if !tree.slabs.tables.is_empty() && shader.narrows_with_slabs(Seal) {
+            region.watch_layers();
+        }
         let list = &mut scratch.point.list;
         let mut cut = Cut::new(tree, &*shader, region, threshold, visibility);
         cut.enter_root(list, None);
