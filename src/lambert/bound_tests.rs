@@ -28,7 +28,7 @@ fn children(tree: &LightTree, parent: usize, wanted: u8) -> ChildrenOf<'_> {
 }
 
 /// `default` cases per property, or `PROPTEST_CASES` where it is set.
-fn cases(default: u32) -> ProptestConfig {
+pub(super) fn cases(default: u32) -> ProptestConfig {
     let cases = std::env::var("PROPTEST_CASES")
         .ok()
         .and_then(|c| c.parse().ok())

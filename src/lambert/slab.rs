@@ -485,20 +485,9 @@ mod tests {
     use proptest::prelude::*;
 
     use super::slab_interval;
+    use crate::lambert::bound_tests::cases;
     use crate::shader::{Shader, Surface};
     use crate::{Lambert, LightTree, PointLight};
-
-    /// `default` cases, or `PROPTEST_CASES` where it is set.
-    fn cases(default: u32) -> ProptestConfig {
-        let cases = std::env::var("PROPTEST_CASES")
-            .ok()
-            .and_then(|c| c.parse().ok())
-            .unwrap_or(default);
-        ProptestConfig {
-            cases,
-            ..ProptestConfig::default()
-        }
-    }
 
     fn unit() -> impl Strategy<Value = Vec3> {
         (-1.0f32..=1.0, 0.0f32..core::f32::consts::TAU).prop_map(|(z, phi)| {
