@@ -307,8 +307,13 @@ fn slab_interval(
     }
     // The shading point itself is within a rounding of the caller's: the
     // sum moves by at most 2^-53 D 2 / gap^3 per unit of intensity (see
-    // POINT_SLACK).
-    let point = POINT_SLACK * distance * 2.0 / (gap * gap * gap) * 1.5;
+    // POINT_SLACK). And each member's height along the unit normal is
+    // within `slack` of its height along the given normal's direction,
+    // which moves the sum by at most slack / gap^3 per unit of intensity
+    // (the pieces above carry it against their own distances, the
+    // expansion against the distance of its centre).
+    let gap3 = gap * gap * gap;
+    let point = (POINT_SLACK * distance * 2.0 * 1.5 + 2.0 * slack) / gap3;
     let lower = (lower * (1.0 - ARITHMETIC_SLACK) - DVec3::splat(point)).max(DVec3::ZERO);
     let upper = upper * (1.0 + ARITHMETIC_SLACK) + DVec3::splat(point);
     Some((lower, upper))
