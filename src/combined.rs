@@ -97,6 +97,26 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
         Some((sum, a.1 + b.1 + sum * f64::EPSILON))
     }
 
+    #[inline]
+    fn sum_lights_plain(
+        &self,
+        _: Seal,
+        p: &Self::PerPoint,
+        s: &Surface,
+        lights: &[PointLight],
+    ) -> Option<(DVec3, DVec3)> {
+        let first = self.first.sum_lights_plain(Seal, &p.0, s, lights);
+        let second = self.second.sum_lights_plain(Seal, &p.1, s, lights);
+        let (a, b) = match (first, second) {
+            (None, None) => return None,
+            (Some(a), Some(b)) => (a, b),
+            (Some(a), None) => (a, (summed(&self.second, &p.1, s, lights), DVec3::ZERO)),
+            (None, Some(b)) => ((summed(&self.first, &p.0, s, lights), DVec3::ZERO), b),
+        };
+        let sum = a.0 + b.0;
+        Some((sum, a.1 + b.1 + sum * f64::EPSILON))
+    }
+
     /// The sum of the two intervals, for per-point data `p` and surface `s`.
     #[inline]
     fn bound(&self, p: &Self::PerPoint, s: &Surface, node: &Node, cone: &Cone) -> NodeEstimate {

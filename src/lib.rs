@@ -130,7 +130,11 @@
 //! of a refined node in `f32` lanes, and the batch call
 //! ([`Shading::shade_batch`]) sums a shared cut's estimates in `f32` lanes
 //! when its certified error is at least `2^-12` of the radiance it aims at.
-//! Each such sum or bound carries a certified bound on its own rounding
+//! Where an `f32` sum of lights is too coarse (lights within a hair of the
+//! tangent plane, whose heights are a small difference of large
+//! coordinates), [`Lambert`] sums them in plain `f64` instead of deciding
+//! each term's sign exactly, bounding each height's rounding by its
+//! magnitude. Each such sum or bound carries a certified bound on its own rounding
 //! (derived in the code beside it), which the reported bound includes, so
 //! the contract is the same.
 //!
@@ -179,6 +183,17 @@
 //! visibility call away; a tree of isotropic lights stores nothing for
 //! emission profiles and takes none of their paths; a [`Shading`] session
 //! reuses its scratch, so shading allocates nothing once warmed.
+//!
+//! A point's cut costs at most about the exact sum of its lights: once its
+//! work (a node bound counted as 16 lights) reaches half the scene's
+//! lights, it stops bounding and sums the lights still waiting, so that
+//! it evaluates each light at most once and at most `N / 32 + 8` node
+//! bounds (scenes of at least 4,096 lights, without a budget, interpolation
+//! across levels or a host's visibility, whose rays cost more than the
+//! cut's classifications). That happens only where the bounds
+//! settle little: a tangent plane running through a layer of lights
+//! everywhere near the point. The batch call shades a group whose shared
+//! cut does not pay point by point.
 //!
 //! Emitters cost more per evaluation than isotropic lights: their lights
 //! are summed in `f64` with each profile's value (the `f32` light sums and

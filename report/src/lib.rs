@@ -37,6 +37,7 @@ pub mod evaluations;
 pub mod exact;
 pub mod exact_emitters;
 pub mod ggx;
+pub mod hostile;
 pub mod image;
 pub mod light_sampling;
 pub mod measure;

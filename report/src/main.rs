@@ -14,6 +14,7 @@
 //! cargo run --release -p manylights-report -- stochastic-batch # the stochastic cut over an image
 //! cargo run --release -p manylights-report -- emitters        # spot lights and virtual point lights
 //! cargo run --release -p manylights-report -- roofs           # roof points among the lamps
+//! cargo run --release -p manylights-report -- hostile         # scenes built to defeat the tree
 //! ```
 //!
 //! The full report takes about a minute on 2 cores, plus about two minutes
@@ -45,7 +46,10 @@
 //! virtual point lights in a room, per point and per pixel,
 //! [`manylights_report::emitters`]) and `roofs` (the certified cut on the street city's ground, façades and
 //! roofs inside the lamps' layer, 10^5 and 10^6 lights, one core, against
-//! the vectorized exact sum, [`manylights_report::roofs`]; under a minute).
+//! the vectorized exact sum, [`manylights_report::roofs`]; under a minute)
+//! and `hostile` (scenes built to defeat the tree, single points and the
+//! batch call against the vectorized exact sum,
+//! [`manylights_report::hostile`]; about a minute).
 //! `--shadow-lights N` sets the occluded city's number of lights (20,000);
 //! `--roof-lights N` (repeatable) the roofs part's (10^5 and 10^6). Writes
 //! to `out/report/` under the repository root:
@@ -82,6 +86,7 @@ use manylights_report::csv::{write_csv, write_scaling_csv};
 use manylights_report::emitters::{EMITTERS, run_emitters};
 use manylights_report::evaluations::print_evaluations_table;
 use manylights_report::ggx::print_ggx;
+use manylights_report::hostile::{HOSTILE, run_hostile};
 use manylights_report::light_sampling::{SAMPLING, run_sampling};
 use manylights_report::measure::MAX_PASSES;
 use manylights_report::mesh_city::{CITY_MESH, run_city_mesh};
@@ -140,6 +145,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                     STOCHASTIC_BATCH,
                     EMITTERS,
                     ROOFS,
+                    HOSTILE,
                 ]
                 .contains(&name) =>
             {
@@ -150,7 +156,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                     "unknown argument {arg:?}; usage: report [--quick] [--shadow-lights N] \
                      [--roof-lights N]... [{EVALUATIONS} | {BOUNDS} | {BATCH} | {} | {} | \
                      {CITY_MESH} | {SHADOWS} | {SCALING} | {ANATOMY} | {GGX} | {SAMPLING} | \
-                     {STOCHASTIC_BATCH} | {EMITTERS} | {ROOFS}]...",
+                     {STOCHASTIC_BATCH} | {EMITTERS} | {ROOFS} | {HOSTILE}]...",
                     SCENE_NAMES.join(" | "),
                     OCCLUDED_NAMES.join(" | ")
                 )
@@ -204,9 +210,21 @@ fn main() -> Result<(), Box<dyn Error>> {
         };
         run_roofs(sizes, quick)?;
     }
+    if named(HOSTILE) {
+        run_hostile(quick)?;
+    }
     if !parts.is_empty()
         && parts.iter().all(|p| {
-            [ANATOMY, GGX, SAMPLING, STOCHASTIC_BATCH, EMITTERS, ROOFS].contains(&p.as_str())
+            [
+                ANATOMY,
+                GGX,
+                SAMPLING,
+                STOCHASTIC_BATCH,
+                EMITTERS,
+                ROOFS,
+                HOSTILE,
+            ]
+            .contains(&p.as_str())
         })
     {
         return Ok(());

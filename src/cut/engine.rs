@@ -98,6 +98,11 @@ pub(crate) trait Region<S: Shader>: Sized {
     /// cutting); `nested` when the cut interpolates.
     fn sums_whole_scene<V: Visibility>(cut: &Cut<'_, S, V, Self>, nested: bool) -> bool;
 
+    /// Whether the cut stops bounding and sums the lights of every entry
+    /// left in the list (its work has passed a share of what summing the
+    /// scene would cost); `nested` when the cut interpolates.
+    fn sums_the_rest<V: Visibility>(cut: &Cut<'_, S, V, Self>, nested: bool) -> bool;
+
     /// The host answered "visible" for the root: `true` when the region
     /// summed the whole scene at once (a tiny scene; the root's entry then
     /// drops out).
@@ -326,6 +331,16 @@ impl<'a, S: Shader, V: Visibility, R: Region<S>> Cut<'a, S, V, R> {
                 // less than cutting it.
                 list.pop_slot();
                 R::lights(self, 0, node.lights(), Seen::Visible, 1.0);
+                continue;
+            }
+            if refining && R::sums_the_rest(self, nesting.is_some()) {
+                // The bounds settle too little here: what is left is summed
+                // light by light, each entry's lights once.
+                while let Some((entry, slot)) = list.pop_slot() {
+                    R::taken(self, slot);
+                    let node = &tree.nodes[entry.node as usize];
+                    R::lights(self, entry.node as usize, node.lights(), entry.seen, 1.0);
+                }
                 continue;
             }
             if refining && !R::affordable(self, list, node, top.seen == Seen::Visible) {

@@ -547,6 +547,13 @@ impl<'s, S: Shader> Region<S> for Shared<'s> {
         false
     }
 
+    /// A group whose shared cut does not pay gives up instead (see
+    /// `affordable`): its points are shaded one by one.
+    #[inline(always)]
+    fn sums_the_rest<V: Visibility>(_: &Cut<'_, S, V, Self>, _: bool) -> bool {
+        false
+    }
+
     #[inline(always)]
     fn summed_on_visible_root<V: Visibility>(_: &mut Cut<'_, S, V, Self>) -> bool {
         false

@@ -9,7 +9,8 @@ use super::engine::Cut;
 use super::error_list::Seen;
 use super::point::{Point, coarse_share, reported_bound};
 use super::policy::{
-    ASK_MAX, COARSE_LIGHTS_MAX, SMALL_SCENE_LIGHTS_COARSE, SUM_LIGHTS_MAX, TINY_SCENE_LIGHTS,
+    ASK_MAX, COARSE_LIGHTS_MAX, COARSE_MISSES_MAX, SMALL_SCENE_LIGHTS_COARSE, SUM_LIGHTS_MAX,
+    TINY_SCENE_LIGHTS,
 };
 use super::result::{ShadeResult, Stop};
 use super::threshold::Threshold;
@@ -277,9 +278,15 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
     /// `weight`, settled: coarsely ([`Shader::sum_lights_coarse`]) where
     /// the sum's error is at most `share` of it channel by channel, the
     /// error joining the settled error; else as
-    /// [`sum_visible`](Self::sum_visible). The caller counts the lights.
+    /// [`sum_seen_plain`](Self::sum_seen_plain), which also takes every
+    /// sum once [`COARSE_MISSES_MAX`] coarse sums in a row were not kept.
+    /// The caller counts the lights.
     #[inline(always)]
     fn sum_seen_coarse(&mut self, lights: &[PointLight], share: f64, weight: f64) {
+        if self.region.coarse_misses >= COARSE_MISSES_MAX {
+            self.sum_seen_plain(lights, share, weight);
+            return;
+        }
         match self.shader.sum_lights_coarse(
             Seal,
             &self.region.per_point,
@@ -289,8 +296,33 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
             Some((sum, error)) if error.cmple(sum * share).all() => {
                 self.region.settled.add(sum * weight);
                 self.region.settled_error += error * weight;
+                self.region.coarse_misses = 0;
             }
-            _ => self.sum_visible(lights, weight),
+            _ => {
+                self.region.coarse_misses += 1;
+                self.sum_seen_plain(lights, share, weight);
+            }
+        }
+    }
+
+    /// `lights`, known visible, times `weight`, where their coarse sum was
+    /// not kept: the shader's plain `f64` sum
+    /// ([`Shader::sum_lights_plain`]) where its error is at most `share` of
+    /// it channel by channel, else [`sum_visible`](Self::sum_visible). The
+    /// caller counts the lights.
+    #[inline(always)]
+    fn sum_seen_plain(&mut self, lights: &[PointLight], share: f64, weight: f64) {
+        let region = &mut self.region;
+        if !settle_plain(
+            self.shader,
+            &region.per_point,
+            region.surface,
+            lights,
+            share,
+            weight,
+            (&mut region.settled, &mut region.settled_error),
+        ) {
+            self.sum_visible(lights, weight);
         }
     }
 
@@ -325,6 +357,30 @@ fn settle_visible<S: Shader>(
 ) {
     for lights in lights.chunks(SUM_LIGHTS_MAX) {
         settled.add(shader.sum_lights(Seal, per_point, surface, lights) * weight);
+    }
+}
+
+/// The shader's plain `f64` sum of `lights`, known visible, times
+/// `weight`, settled into `settled` and its error into the second, where
+/// that error is at most `share` of the sum channel by channel: whether it
+/// was.
+#[inline(always)]
+fn settle_plain<S: Shader>(
+    shader: &S,
+    per_point: &S::PerPoint,
+    surface: &Surface,
+    lights: &[PointLight],
+    share: f64,
+    weight: f64,
+    (settled, error_sum): (&mut CompensatedSum, &mut DVec3),
+) -> bool {
+    match shader.sum_lights_plain(Seal, per_point, surface, lights) {
+        Some((sum, error)) if error.cmple(sum * share).all() => {
+            settled.add(sum * weight);
+            *error_sum += error * weight;
+            true
+        }
+        _ => false,
     }
 }
 
@@ -365,6 +421,7 @@ impl<S: Shader> SmallScene<'_, S> {
     /// [`Shader::sum_lanes_coarse`] where it has one, else its
     /// [`Shader::sum_lights_coarse`], kept where the sum's error is at most
     /// `share` of it channel by channel (as `Cut::sum_seen_coarse`); else
+    /// the shader's plain `f64` sum where the same holds of it; else
     /// [`settle_visible`].
     #[inline(always)]
     fn settle(
@@ -399,7 +456,12 @@ impl<S: Shader> SmallScene<'_, S> {
                     settled.add(sum * weight);
                     *error_sum += error * weight;
                 }
-                _ => settle_visible(shader, per_point, surface, lights, weight, settled),
+                _ => {
+                    let sums = (&mut *settled, &mut *error_sum);
+                    if !settle_plain(shader, per_point, surface, lights, self.share, weight, sums) {
+                        settle_visible(shader, per_point, surface, lights, weight, settled);
+                    }
+                }
             }
         }
     }

@@ -11,7 +11,8 @@ use super::error_list::{Class, Entry, ErrorList, Seen};
 use super::interpolate::{self, Item, NO_PARENT, Nesting};
 use super::policy::{
     COARSE_NODES_MAX, COARSE_SHARE_DIVISOR, COARSE_TARGET_MIN, EXACT_NODE_LIGHTS, NEAR_NODE_LIGHTS,
-    SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE, is_near,
+    NODE_WORK, REST_MIN_LIGHTS, REST_SHARE_DIVISOR, SMALL_SCENE_LIGHTS, SMALL_SCENE_LIGHTS_COARSE,
+    is_near,
 };
 use super::result::{ShadeResult, Stop};
 use super::threshold::{Target, Threshold};
@@ -59,6 +60,10 @@ pub(crate) struct Point<'a, S: Shader> {
     pub(crate) settled: CompensatedSum,
     /// The certified error of what was settled by coarse sums of lights.
     pub(crate) settled_error: DVec3,
+    /// Coarse (`f32`) sums of lights not kept since the last one kept:
+    /// from [`COARSE_MISSES_MAX`](super::policy::COARSE_MISSES_MAX) on,
+    /// lights go to the plain `f64` sum first.
+    pub(crate) coarse_misses: u32,
     /// The shader's [`horizon`](Shader::horizon) at this point.
     pub(crate) horizon: Option<Vec3>,
     /// The last plane asked about and whether it lies at or below the
@@ -193,6 +198,7 @@ impl<'a, S: Shader> Point<'a, S> {
             small_lanes,
             settled: CompensatedSum::default(),
             settled_error: DVec3::ZERO,
+            coarse_misses: 0,
             horizon: shader.horizon(surface),
             dark_plane: (NO_PLANE, false),
             children: Children::default(),
@@ -506,6 +512,23 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
                 .cost()
                 .saturating_add(cut.tree.nodes[0].light_count)
                 <= cut.budget
+    }
+
+    /// Once the cut's work, a node bound counted as [`NODE_WORK`] lights,
+    /// reaches `1 /` [`REST_SHARE_DIVISOR`] of the scene's lights (scenes
+    /// of at least [`REST_MIN_LIGHTS`], without interpolation or a
+    /// budget), where every light is visible: with a host, the lights of
+    /// entries of unknown visibility would take a ray each, where the cut's
+    /// classifications settle whole nodes.
+    #[inline(always)]
+    fn sums_the_rest<V: Visibility>(cut: &Cut<'_, S, V, Self>, nested: bool) -> bool {
+        let lights = u64::from(cut.tree.nodes[0].light_count);
+        let work = u64::from(cut.work.lights) + NODE_WORK * u64::from(cut.work.nodes);
+        V::ALWAYS_VISIBLE
+            && !nested
+            && cut.budget == u32::MAX
+            && lights >= REST_MIN_LIGHTS
+            && work * REST_SHARE_DIVISOR >= lights
     }
 
     /// As [`shade_small_scene`](super::lights::shade_small_scene) does without a host, wherever the point

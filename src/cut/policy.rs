@@ -60,6 +60,40 @@ pub(crate) const COARSE_TARGET_MIN: f64 = 1.0 / 4096.0;
 /// sum to be kept, as a divisor of the relative target: `1/32`.
 pub(crate) const COARSE_SHARE_DIVISOR: f64 = 32.0;
 
+/// A point's cut whose work reaches `1 /` this share of its scene's lights
+/// (a node bound counted as [`NODE_WORK`] lights) stops bounding and sums
+/// the lights of every entry left in its list: where the bounds settle
+/// little (a tangent plane through the lights, a point inside a cluster at
+/// every scale) the walk to the leaves would bound about one node per 14
+/// lights on the way, each costing the sums of a dozen lights or more. So
+/// a point's cut evaluates every light at most once and at most `N / 32 +
+/// 8` node bounds (`N / (2 * 16)`, plus one refinement's children): never
+/// much more than the exact sum of its lights. Only without a host's
+/// visibility ([`Unoccluded`](crate::Unoccluded)): with one, the lights
+/// left would take a shadow ray each, where the cut's classifications
+/// settle whole nodes (the occluded city of the report's tests, leaves of
+/// four lights, went from under 500 rays a point to 7,941). Half rather than less: the
+/// sum takes every light still waiting, where a cut that is only slow (a
+/// point inside a cluster) would have settled most of them in nodes.
+pub(crate) const REST_SHARE_DIVISOR: u64 = 2;
+
+/// A node bound's cost in lights' sums, for [`REST_SHARE_DIVISOR`]: a
+/// Lambert node bound (children bounded side by side, with the slab
+/// moments' test) took about as many instructions as the plain `f64` sums
+/// of 16 to 25 lights (callgrind, `docs/tuning.md`).
+pub(crate) const NODE_WORK: u64 = 16;
+
+/// Scenes of fewer lights never stop bounding for [`REST_SHARE_DIVISOR`]:
+/// summing them costs little either way.
+pub(crate) const REST_MIN_LIGHTS: u64 = 4096;
+
+/// Coarse (`f32`) sums of lights a point's cut may fail to keep in a row
+/// before it sums lights in plain `f64` (with its rounding bound) without
+/// trying the coarse sum first: where the tangent plane runs through a
+/// layer of lights, every light's `f32` height is mostly rounding and
+/// every coarse sum is thrown away.
+pub(crate) const COARSE_MISSES_MAX: u32 = 4;
+
 /// Node evaluations after which a cut bounds children in `f64` only. The
 /// single-precision bounds carry a rounding allowance of a few dozen `f32`
 /// ulps of `I kd / D^2`, while a node seen at a grazing angle (the lights

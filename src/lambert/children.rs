@@ -134,7 +134,7 @@ fn group_bounds<const N: usize, const R: usize, const M: usize>(
 
 /// [`group::lane_bounds`] compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 fn group_bounds_avx2<const N: usize, const R: usize, const M: usize>(
     block: &Block<N, R, M>,
     at: &group::PointView<f32>,

@@ -322,7 +322,7 @@ struct Sums8 {
 
 #[cfg(target_arch = "x86_64")]
 impl Sums8 {
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline]
     fn new(frame: &Frame) -> Self {
         use core::arch::x86_64::{_CMP_LE_OQ, _mm256_cmp_ps, _mm256_set1_ps, _mm256_setzero_ps};
@@ -339,7 +339,7 @@ impl Sums8 {
 
     /// Eight lights' terms (`x, y, z, red, green, blue`, one vector each),
     /// added to the lanes that `mask` keeps (all for `None`).
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline]
     fn add(
         &mut self,
@@ -397,7 +397,7 @@ impl Sums8 {
     /// `f64` lanes `wide` (`wide[2 q]` lanes 0 to 3 of quantity `q`,
     /// `wide[2 q + 1]` lanes 4 to 7) and clears them; the range and the
     /// lights counted carry on (module docs, "Whole scenes").
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline]
     fn flush(&mut self, wide: &mut [core::arch::x86_64::__m256d; 8]) {
         use core::arch::x86_64::{
@@ -418,7 +418,7 @@ impl Sums8 {
     /// The lanes' sums, each added as `((l0 + l1) + (l2 + l3)) + ((l4 +
     /// l5) + (l6 + l7))`, times `kd`, and the bound for `count` lights; or
     /// `None` out of range (see [`Frame::finish`]).
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     #[inline]
     fn finish(&self, kd: DVec3, count: usize) -> Option<(DVec3, DVec3)> {
         use core::arch::x86_64::{
@@ -445,7 +445,7 @@ impl Sums8 {
 /// The lanes that hold one of the last `rest` lights of a run (lanes 0 to
 /// `rest - 1`), or `None` for a full group of eight.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 #[inline]
 fn last_lanes(rest: usize) -> Option<core::arch::x86_64::__m256> {
     use core::arch::x86_64::{_CMP_LT_OQ, _mm256_cmp_ps, _mm256_set1_ps, _mm256_setr_ps};
@@ -460,7 +460,7 @@ fn last_lanes(rest: usize) -> Option<core::arch::x86_64::__m256> {
 /// [`sum_baseline`] with AVX2 instructions ([`Sums8`]), eight lights at a
 /// time, each gathered from its record: the same bits.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 pub(crate) fn sum_avx2(
     kd: DVec3,
     surface: &Surface,
@@ -572,7 +572,7 @@ macro_rules! load_lanes {
 /// [`sum_lanes_baseline`] with AVX2 instructions ([`Sums8`]): each
 /// quantity of eight lights one load, so the same bits.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 pub(crate) fn sum_lanes_avx2(
     kd: DVec3,
     surface: &Surface,
@@ -599,7 +599,7 @@ pub(crate) fn sum_lanes_avx2(
 /// quantity of eight lights one load, each block's lanes carried in `f64`
 /// vectors, so the same bits.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 pub(crate) fn sum_scene_lanes_avx2(
     kd: DVec3,
     surface: &Surface,

@@ -365,6 +365,20 @@ impl Shader for Lambert {
         self.sum_group(surface, lights)
     }
 
+    /// The plain `f64` sum, four lights side by side, each height's
+    /// rounding bounded by its magnitude (see `PLAIN_HEIGHT_ERROR` in the
+    /// source): for any lights and point in the supported range.
+    #[inline]
+    fn sum_lights_plain(
+        &self,
+        _: Seal,
+        _: &(),
+        surface: &Surface,
+        lights: &[PointLight],
+    ) -> Option<(DVec3, DVec3)> {
+        Some(self.sum_plain(surface, lights))
+    }
+
     /// In `f32`, eight lights side by side: within `32 * 2^-24` of `kd`
     /// times `sum max_k I_k / d^2` over the lights (per channel), for
     /// squared distances between `2^-60` and `2^60` and intensities up to

@@ -81,7 +81,7 @@ impl Lambert {
 
     /// [`bound_group`](Self::bound_group) compiled for AVX2.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     fn bound_group_avx2(
         &self,
         surface: &Surface,

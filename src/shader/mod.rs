@@ -280,6 +280,34 @@ pub trait Shader {
         None
     }
 
+    /// The plain `f64` sum of the model's terms for `lights`, known
+    /// visible, with a certified bound on its error: `Some((sum, error))`
+    /// with `|sum - exact| <= error` per channel, as
+    /// [`sum_lights_coarse`](Self::sum_lights_coarse), or `None` (the
+    /// default). Where that coarse sum's error is too large for the cut
+    /// (lights within a hair of the tangent plane, whose `f32` heights
+    /// are mostly rounding), this one costs a few `f64` operations a light,
+    /// where [`sum_lights`](Self::sum_lights) takes the error-free dot
+    /// products behind every such term's sign. At most
+    /// [`COARSE_LIGHTS_MAX`] lights a call. [`Lambert`] bounds the plain
+    /// heights' rounding by their magnitudes; a sum of shaders
+    /// ([`Combined`](crate::Combined)) where either term does, the other
+    /// adding its [`sum_lights`](Self::sum_lights).
+    ///
+    /// [`Lambert`]: crate::Lambert
+    #[inline]
+    #[doc(hidden)]
+    fn sum_lights_plain(
+        &self,
+        _: Seal,
+        point: &Self::PerPoint,
+        surface: &Surface,
+        lights: &[PointLight],
+    ) -> Option<(DVec3, DVec3)> {
+        let _ = (point, surface, lights);
+        None
+    }
+
     /// [`sum_lights_coarse`](Self::sum_lights_coarse) of the `count`
     /// lights that `lanes` hold side by side (light `8 j + k` in lane `k`
     /// of `lanes[j]`; at most 64 lights, `count` of them, the spare lanes

@@ -88,7 +88,7 @@ impl Grid {
     /// `DVec3::max` and `DVec3::min` keep `self`) and truncation (the
     /// clamped values fit an `i32`), so the same codes.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     fn fill_codes_avx2(&self, lights: &[crate::PointLight], out: &mut [u64]) {
         use core::arch::x86_64::{
             _mm256_cvtepu32_epi64, _mm256_cvttpd_epi32, _mm256_extract_epi64, _mm256_max_pd,
@@ -143,7 +143,7 @@ impl Grid {
 
 /// [`spread`] of each of four lanes.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,fma")]
 #[inline]
 fn spread_lanes(x: core::arch::x86_64::__m256i) -> core::arch::x86_64::__m256i {
     use core::arch::x86_64::{

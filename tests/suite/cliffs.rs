@@ -3,6 +3,7 @@
 
 use glam::Vec3;
 use manylights::{Lambert, LightTree, PointLight, Threshold};
+use manylights_report::scenes;
 
 /// `n` coincident lights at `at`.
 fn stack(n: usize, at: Vec3) -> Vec<PointLight> {
@@ -219,11 +220,13 @@ fn a_point_far_beyond_the_edge_of_a_city_sees_it_at_a_grazing_angle() {
     }
 }
 
-/// Where the bounds settle nothing early, a point's cut walks down to the
-/// leaves: every light evaluated once and the nodes above them bounded once
-/// (about `N / 14` with the default leaves), never more.
+/// Where the bounds settle nothing early, a point's cut stops bounding once
+/// its work (a node bound counted as 16 lights) reaches half the scene's
+/// lights, and sums what is left: every light evaluated at most once and
+/// at most `N / 32 + 8` nodes bounded, against about `N / 14` for a walk
+/// to the leaves.
 fn at_most_a_walk_to_the_leaves(r: &manylights::ShadeResult, lights: usize) -> bool {
-    r.lights_evaluated as usize <= lights && r.nodes_evaluated as usize <= lights / 8 + 512
+    r.lights_evaluated as usize <= lights && r.nodes_evaluated as usize <= lights / 32 + 8
 }
 
 /// Deterministic uniform numbers in `[0, 1)` (a 64-bit LCG's high bits).
@@ -237,28 +240,21 @@ fn uniforms(seed: u64) -> impl FnMut() -> f32 {
     }
 }
 
-/// Lights exactly in the plane `x + y + z = 0` (coordinates multiples of
-/// `1/64`, so that `z = -(x + y)` is exact), a point in the plane among
-/// them, and a normal slightly off the plane's, as smooth shading gives on
-/// a roof: every node at every level straddles the tangent plane. With
-/// the normal exactly the plane's, every light lies in the tangent plane
-/// and the whole scene is exactly 0.
+/// Lights exactly in the plane `x + y + z = 0`, a point in the plane
+/// among them, and a normal slightly off the plane's, as smooth shading
+/// gives on a roof (`manylights_report::scenes::tilted_plane`): every node
+/// at every level straddles the tangent plane. With the normal exactly the
+/// plane's, every light lies in the tangent plane and the whole scene is
+/// exactly 0.
 #[test]
 fn a_normal_slightly_off_a_plane_of_lights_costs_at_most_a_walk_to_the_leaves() {
     const LIGHTS: usize = 100_000;
-    let mut u = uniforms(57);
-    let lights: Vec<PointLight> = (0..LIGHTS)
-        .map(|_| {
-            let x = ((u() - 0.5) * 400.0 * 64.0).round() / 64.0;
-            let y = ((u() - 0.5) * 400.0 * 64.0).round() / 64.0;
-            PointLight::new(Vec3::new(x, y, -(x + y)), Vec3::new(1.0, 0.8, 0.6))
-        })
-        .collect();
+    let lights = scenes::tilted_plane(LIGHTS, 57);
     let tree = LightTree::build(&lights).unwrap();
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
-    let p = Vec3::new(0.25, -0.5, 0.25);
+    let p = scenes::TILTED_POINT;
     for e in [1e-7f32, 1e-5, 1e-3] {
-        let normal = Vec3::new(1.0, 1.0, 1.0 + e).normalize();
+        let normal = scenes::tilted_normal(e);
         let exact = s.exact(p, normal).unwrap();
         let r = s.shade(p, normal, Threshold::relative(0.01)).unwrap();
         assert!(r.certifies(exact), "e = {e}: {r:?}");
@@ -271,6 +267,20 @@ fn a_normal_slightly_off_a_plane_of_lights_costs_at_most_a_walk_to_the_leaves() 
             "e = {e}: {} evaluations for {LIGHTS} lights",
             r.cost()
         );
+        // Under a budget (here one that never binds) the cut never stops
+        // bounding to sum the rest: it walks to the leaves, bounding more.
+        let walk = s
+            .shade(
+                p,
+                normal,
+                Threshold::relative(0.01).with_budget(u32::MAX - 1),
+            )
+            .unwrap();
+        assert!(walk.certifies(exact), "e = {e}: {walk:?}");
+        assert!(
+            r.nodes_evaluated + r.nodes_evaluated / 8 < walk.nodes_evaluated,
+            "e = {e}: {r:?} against the walk {walk:?}"
+        );
     }
     let flat = Vec3::ONE.normalize();
     let r = s.shade(p, flat, Threshold::relative(0.01)).unwrap();
@@ -279,20 +289,13 @@ fn a_normal_slightly_off_a_plane_of_lights_costs_at_most_a_walk_to_the_leaves() 
 }
 
 /// Lights at distances `2^-k` from a point in random directions, the point
-/// at the cluster's centre: every node's ball holds the point or nearly,
-/// at every scale.
+/// at the cluster's centre (`manylights_report::scenes::geometric_cluster`):
+/// every node's ball holds the point or nearly, at every scale.
 #[test]
 fn a_point_at_the_centre_of_a_geometric_cluster_costs_at_most_a_walk_to_the_leaves() {
     const LIGHTS: usize = 100_000;
-    let mut u = uniforms(1998);
-    let centre = Vec3::new(3.0, -2.0, 1.0);
-    let lights: Vec<PointLight> = (0..LIGHTS)
-        .map(|i| {
-            let k = (i % 40) as i32;
-            let direction = Vec3::new(u() - 0.5, u() - 0.5, u() - 0.5).normalize_or(Vec3::Z);
-            PointLight::new(centre + direction * 2f32.powi(-k), Vec3::ONE)
-        })
-        .collect();
+    let centre = scenes::CLUSTER_CENTRE;
+    let lights = scenes::geometric_cluster(LIGHTS, 1998);
     let tree = LightTree::build(&lights).unwrap();
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     for t in [0.01, 0.1] {
@@ -309,21 +312,13 @@ fn a_point_at_the_centre_of_a_geometric_cluster_costs_at_most_a_walk_to_the_leav
     }
 }
 
-/// Lights along a logarithmic spiral in a plane, shaded at its pole: the
-/// lights' distances span many decades, and nodes near the pole hold it.
+/// Lights along a logarithmic spiral in a plane, shaded at its pole
+/// (`manylights_report::scenes::log_spiral`): the lights' distances span
+/// many decades, and nodes near the pole hold it.
 #[test]
 fn a_point_at_the_pole_of_a_logarithmic_spiral_costs_at_most_a_walk_to_the_leaves() {
     const LIGHTS: usize = 100_000;
-    let lights: Vec<PointLight> = (0..LIGHTS)
-        .map(|i| {
-            let theta = i as f32 * 0.01;
-            let r = 1e-3 * (0.012 * theta).exp();
-            PointLight::new(
-                Vec3::new(r * theta.cos(), r * theta.sin(), 0.01 * r),
-                Vec3::ONE,
-            )
-        })
-        .collect();
+    let lights = scenes::log_spiral(LIGHTS);
     let tree = LightTree::build(&lights).unwrap();
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
     for normal in [Vec3::Z, Vec3::new(0.2, 0.1, 1.0).normalize()] {
@@ -340,27 +335,20 @@ fn a_point_at_the_pole_of_a_logarithmic_spiral_costs_at_most_a_walk_to_the_leave
     }
 }
 
-/// Lights within `1e-6` of the ground, points on the ground: every shared
-/// node straddles every point's tangent plane. The batch call costs about
-/// what its points cost shaded one by one: a group whose shared cut does
-/// not pay is shaded point by point.
+/// Lights within `1e-6` of the ground, points on the ground
+/// (`manylights_report::scenes::thin_layer`): every shared node straddles
+/// every point's tangent plane. The batch call costs about what its points
+/// cost shaded one by one: a group whose shared cut does not pay is shaded
+/// point by point.
 #[test]
 fn a_batch_among_lights_in_its_tangent_plane_costs_about_its_points_alone() {
     const LIGHTS: usize = 100_000;
-    let mut u = uniforms(7);
-    let lights: Vec<PointLight> = (0..LIGHTS)
-        .map(|_| {
-            let (x, y) = ((u() - 0.5) * 200.0, (u() - 0.5) * 200.0);
-            PointLight::new(Vec3::new(x, y, (u() - 0.5) * 2e-6), Vec3::ONE)
-        })
-        .collect();
+    let lights = scenes::thin_layer(LIGHTS, 7);
     let tree = LightTree::build(&lights).unwrap();
     let mut s = tree.shading(Lambert::new(Vec3::ONE));
-    let queries: Vec<_> = (0..256)
-        .map(|i| {
-            let (x, y) = ((i % 16) as f32 * 0.25, (i / 16) as f32 * 0.25);
-            manylights::Query::new(Vec3::new(x, y, 0.0), Vec3::Z).unwrap()
-        })
+    let queries: Vec<_> = scenes::thin_layer_points(16)
+        .into_iter()
+        .map(|p| manylights::Query::new(p, Vec3::Z).unwrap())
         .collect();
     let threshold = Threshold::relative(0.01);
     let mut results = vec![manylights::ShadeResult::default(); queries.len()];

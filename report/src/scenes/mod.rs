@@ -23,10 +23,14 @@
 //!   traced from a few primary lights).
 //! * [`sphere_lights`]: lights over a sphere, for points whose tangent
 //!   plane cuts it (the `seams` example's horizon scanlines).
+//! * [`tilted_plane`], [`geometric_cluster`], [`log_spiral`],
+//!   [`thin_layer`]: scenes built to defeat the tree (the report's
+//!   `hostile` part and the crate's cost tests).
 
 mod canopy;
 mod chandelier;
 mod ground;
+mod hostile;
 mod night_city;
 mod room;
 mod sphere;
@@ -36,6 +40,10 @@ mod strings;
 pub use canopy::canopy;
 pub use chandelier::chandelier;
 pub use ground::{GROUND_SIZE, ground_lights, ground_points};
+pub use hostile::{
+    CLUSTER_CENTRE, TILTED_POINT, geometric_cluster, log_spiral, thin_layer, thin_layer_points,
+    tilted_normal, tilted_plane,
+};
 pub use night_city::{Building, City, GROUND_ALBEDO, SHADOW_BLOCKS, city_shadows};
 pub use room::{POINT_OFFSET, ROOM_SIZE, Room, VPL_OFFSET, isotropic};
 pub use sphere::{SPHERE_RADIUS, sphere_lights};
