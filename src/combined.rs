@@ -87,14 +87,7 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
     ) -> Option<(DVec3, DVec3)> {
         let first = self.first.sum_lights_coarse(Seal, &p.0, s, lights);
         let second = self.second.sum_lights_coarse(Seal, &p.1, s, lights);
-        let (a, b) = match (first, second) {
-            (None, None) => return None,
-            (Some(a), Some(b)) => (a, b),
-            (Some(a), None) => (a, (summed(&self.second, &p.1, s, lights), DVec3::ZERO)),
-            (None, Some(b)) => ((summed(&self.first, &p.0, s, lights), DVec3::ZERO), b),
-        };
-        let sum = a.0 + b.0;
-        Some((sum, a.1 + b.1 + sum * f64::EPSILON))
+        self.added(first, second, p, s, lights)
     }
 
     #[inline]
@@ -107,14 +100,7 @@ impl<A: Shader, B: Shader> Shader for Combined<A, B> {
     ) -> Option<(DVec3, DVec3)> {
         let first = self.first.sum_lights_plain(Seal, &p.0, s, lights);
         let second = self.second.sum_lights_plain(Seal, &p.1, s, lights);
-        let (a, b) = match (first, second) {
-            (None, None) => return None,
-            (Some(a), Some(b)) => (a, b),
-            (Some(a), None) => (a, (summed(&self.second, &p.1, s, lights), DVec3::ZERO)),
-            (None, Some(b)) => ((summed(&self.first, &p.0, s, lights), DVec3::ZERO), b),
-        };
-        let sum = a.0 + b.0;
-        Some((sum, a.1 + b.1 + sum * f64::EPSILON))
+        self.added(first, second, p, s, lights)
     }
 
     /// The sum of the two intervals, for per-point data `p` and surface `s`.
@@ -261,6 +247,32 @@ fn summed<S: Shader>(shader: &S, p: &S::PerPoint, s: &Surface, lights: &[PointLi
         .chunks(SUM_LIGHTS_MAX)
         .map(|l| shader.sum_lights(Seal, p, s, l))
         .sum()
+}
+
+impl<A: Shader, B: Shader> Combined<A, B> {
+    /// The terms' sums over `lights` with their errors, `first` and
+    /// `second` as the terms gave them: a term that gave none adds its
+    /// [`sum_lights`](Shader::sum_lights) (no error counted for it), and
+    /// the total carries `f64::EPSILON` of itself for the last addition;
+    /// `None` where neither term gave one.
+    #[inline]
+    fn added(
+        &self,
+        first: Option<(DVec3, DVec3)>,
+        second: Option<(DVec3, DVec3)>,
+        p: &<Self as Shader>::PerPoint,
+        s: &Surface,
+        lights: &[PointLight],
+    ) -> Option<(DVec3, DVec3)> {
+        let (a, b) = match (first, second) {
+            (None, None) => return None,
+            (Some(a), Some(b)) => (a, b),
+            (Some(a), None) => (a, (summed(&self.second, &p.1, s, lights), DVec3::ZERO)),
+            (None, Some(b)) => ((summed(&self.first, &p.0, s, lights), DVec3::ZERO), b),
+        };
+        let sum = a.0 + b.0;
+        Some((sum, a.1 + b.1 + sum * f64::EPSILON))
+    }
 }
 
 impl<A: ViewIndependent, B: ViewIndependent> ViewIndependent for Combined<A, B> {}

@@ -502,6 +502,20 @@ mod tests {
     use crate::shader::{Seal, Shader, Surface};
     use crate::{Lambert, PointLight};
 
+    /// The lights' terms summed one by one, compensated.
+    fn exact_sum(lambert: &Lambert, surface: &Surface, lights: &[PointLight]) -> glam::DVec3 {
+        let mut exact = crate::numeric::CompensatedSum::default();
+        for light in lights {
+            exact.add(lambert.eval(
+                &(),
+                surface,
+                light.position.as_dvec3(),
+                light.intensity.as_dvec3(),
+            ));
+        }
+        exact.value()
+    }
+
     /// `sum_lights` against the compensated sum of `eval` over the same
     /// lights, for every count from 0 to 16 (full and short chunks of
     /// four): lights above, below and exactly in the tangent plane, lights
@@ -541,16 +555,7 @@ mod tests {
                     )
                 })
                 .collect();
-            let mut exact = crate::numeric::CompensatedSum::default();
-            for light in &lights {
-                exact.add(lambert.eval(
-                    &(),
-                    &surface,
-                    light.position.as_dvec3(),
-                    light.intensity.as_dvec3(),
-                ));
-            }
-            let exact = exact.value();
+            let exact = exact_sum(&lambert, &surface, &lights);
             let sum = lambert.sum_lights(Seal, &(), &surface, &lights);
             let baseline = baseline(|| lambert.sum_lights(Seal, &(), &surface, &lights));
             assert_eq!(
@@ -634,16 +639,7 @@ mod tests {
                     )
                 })
                 .collect();
-            let mut exact = crate::numeric::CompensatedSum::default();
-            for light in &lights {
-                exact.add(lambert.eval(
-                    &(),
-                    &surface,
-                    light.position.as_dvec3(),
-                    light.intensity.as_dvec3(),
-                ));
-            }
-            let exact = exact.value();
+            let exact = exact_sum(&lambert, &surface, &lights);
             let (sum, error) = lambert
                 .sum_lights_plain(Seal, &(), &surface, &lights)
                 .unwrap();
