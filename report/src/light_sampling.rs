@@ -12,14 +12,13 @@
 //! cargo run --release -p manylights-report -- sampling
 //! ```
 //!
-//! For each scene and method: the relative variance of the one-sample
-//! estimate `f / pmf` (its variance over the squared exact value, channels
-//! summed, from many samples at each point; mean and median over the
-//! points), the time per sample (choosing the light, its probability and
-//! its exact term), their product (the mean squared error at equal time,
-//! up to the time given), and the mean squared relative error measured at
-//! equal time: every method given the time pbrt-v4's sampler takes for
-//! [`EQUAL_TIME_SAMPLES`] samples per point.
+//! For each scene and method: the exact relative variance of the
+//! one-sample estimate `f / pmf` (its variance over the squared exact
+//! value, channels summed, from every light's probability at each point;
+//! mean and median over the points), the time per sample (choosing the
+//! light, its probability and its exact term, measured over many samples),
+//! and their product: the mean squared error at equal time, up to the time
+//! given.
 
 use std::error::Error;
 use std::time::Instant;
@@ -38,15 +37,10 @@ use crate::scenes::{Room, SPHERE_RADIUS, SceneRng, city, rng, sphere_lights};
 /// The part's name on the command line.
 pub const SAMPLING: &str = "sampling";
 
-/// Samples per point behind each variance.
+/// Samples per point behind each time per sample.
 const SAMPLES: usize = 4096;
 /// Shading points per scene.
 const POINTS: usize = 128;
-/// The equal-time budget, in samples of pbrt-v4's sampler per point.
-pub const EQUAL_TIME_SAMPLES: f64 = 16.0;
-/// Rounds of the equal-time measurement (each a fresh estimate at every
-/// point).
-const EQUAL_TIME_ROUNDS: usize = 16;
 /// Calls per point of the stochastic cut, and its points.
 const STOCHASTIC_CALLS: usize = 64;
 const STOCHASTIC_POINTS: usize = 32;
@@ -173,10 +167,6 @@ struct Row {
     median: f64,
     /// Seconds per sample.
     time: f64,
-    /// Mean squared relative error at equal time, and the samples per
-    /// point it took.
-    equal_time: f64,
-    equal_samples: usize,
 }
 
 /// The one-sample estimate of `method` at `query`: `f / pmf`, channels
@@ -212,54 +202,57 @@ fn sum(v: DVec3) -> f64 {
     v.x + v.y + v.z
 }
 
-/// The relative variances (per point with a positive exact value) and the
-/// time per sample of `method` over `case`, [`SAMPLES`] samples a point.
-fn variances(method: &impl OneSample, case: &Case, rng: &mut SceneRng) -> (Vec<f64>, f64) {
+/// The exact relative variances of `method`'s one-sample estimate (per
+/// point with a positive exact value): `sum_i f_i^2 / pmf_i / F^2 - 1` over
+/// every light, from every light's probability
+/// ([`OneSample::probabilities`]), infinite where a lit light has
+/// probability 0; and the time per sample, from [`SAMPLES`] samples at each
+/// point. A variance measured from samples would miss the rare lights whose
+/// `f / pmf` is huge, and read low exactly where a method is poor.
+fn variances(method: &(impl OneSample + Sync), case: &Case, rng: &mut SceneRng) -> (Vec<f64>, f64) {
     let lambert = Lambert::new(case.kd);
-    let mut relative = Vec::with_capacity(case.queries.len());
     let started = Instant::now();
-    for (query, exact) in case.queries.iter().zip(&case.exact) {
-        let (mut s, mut s2) = (0.0, 0.0);
+    let mut total = 0.0;
+    for query in &case.queries {
         for _ in 0..SAMPLES {
             let u = rng.random::<f64>();
-            let x = estimate(method, &lambert, &case.lights, &case.emission, query, u);
-            s += x;
-            s2 += x * x;
-        }
-        let n = SAMPLES as f64;
-        let mean = s / n;
-        let variance = (s2 / n - mean * mean).max(0.0) * n / (n - 1.0);
-        let exact = sum(*exact);
-        if exact > 0.0 {
-            relative.push(variance / (exact * exact));
+            total += estimate(method, &lambert, &case.lights, &case.emission, query, u);
         }
     }
+    std::hint::black_box(total);
     let time = started.elapsed().as_secs_f64() / (SAMPLES * case.queries.len()) as f64;
+    let relative = case
+        .queries
+        .par_iter()
+        .filter_map(|query| {
+            let mut pmf = vec![0.0; case.lights.len()];
+            method.probabilities(query, &mut pmf);
+            let (mut exact, mut second) = (0.0, 0.0);
+            for (i, light) in case.lights.iter().enumerate() {
+                let f = lambert.eval(
+                    &(),
+                    query.surface(),
+                    light.position.as_dvec3(),
+                    light.intensity.as_dvec3(),
+                );
+                let factor = case
+                    .emission
+                    .get(i)
+                    .map_or(1.0, |e| e.factor(light.position, query.point()));
+                let f = sum(f) * factor;
+                if f > 0.0 {
+                    exact += f;
+                    second += if pmf[i] > 0.0 {
+                        f * f / pmf[i]
+                    } else {
+                        f64::INFINITY
+                    };
+                }
+            }
+            (exact > 0.0).then(|| (second / (exact * exact) - 1.0).max(0.0))
+        })
+        .collect();
     (relative, time)
-}
-
-/// The mean squared relative error of the mean of `samples` estimates per
-/// point, over [`EQUAL_TIME_ROUNDS`] rounds.
-fn equal_time(method: &impl OneSample, case: &Case, samples: usize, rng: &mut SceneRng) -> f64 {
-    let lambert = Lambert::new(case.kd);
-    let (mut total, mut count) = (0.0, 0usize);
-    for _ in 0..EQUAL_TIME_ROUNDS {
-        for (query, exact) in case.queries.iter().zip(&case.exact) {
-            let exact = sum(*exact);
-            if !(exact > 0.0) {
-                continue;
-            }
-            let mut s = 0.0;
-            for _ in 0..samples {
-                let u = rng.random::<f64>();
-                s += estimate(method, &lambert, &case.lights, &case.emission, query, u);
-            }
-            let e = (s / samples as f64 - exact) / exact;
-            total += e * e;
-            count += 1;
-        }
-    }
-    total / count.max(1) as f64
 }
 
 /// Mean and median.
@@ -277,12 +270,12 @@ pub fn run_sampling(quick: bool) -> Result<(), Box<dyn Error>> {
     println!("## Light sampling: one light per point, as a path tracer samples\n");
     println!(
         "Command: `cargo run --release -p manylights-report -- {SAMPLING}`. Lambert receivers, \
-         no occluders, one thread. Relative variance = variance of the one-sample estimate \
-         f / pmf (channels summed) over the squared exact value, from {SAMPLES} samples at each \
-         of {POINTS} points (mean and median over the points). Time = per sample: choosing the \
-         light and its probability, its exact term, the random number. Equal time: every \
-         method gets the time pbrt-v4's sampler takes for {EQUAL_TIME_SAMPLES} samples per \
-         point; mean squared relative error of the mean over {EQUAL_TIME_ROUNDS} rounds. \
+         no occluders, one thread. Relative variance = exact variance of the one-sample \
+         estimate f / pmf (channels summed), sum f^2 / pmf - F^2 over every light, over the \
+         squared exact value F^2, at each of {POINTS} points (mean and median over the \
+         points). Time = per sample, over {SAMPLES} samples a point: choosing the light and \
+         its probability, its exact term, the random number. Variance x time is the mean \
+         squared error at equal time, up to the time given. \
          Methods: power (alias table; Shirley et al. 1996, pbrt-v4's PowerLightSampler); \
          pbrt-v4 (BVHLightSampler's descent with LightBounds::Importance of each node's box \
          and summed largest channels, leaf lights by their own importance); Cycles (light \
@@ -337,43 +330,32 @@ fn run_case(
         ("Cycles", variances(&cycles, case, &mut rng)),
         ("crate", variances(&ours, case, &mut rng)),
     ];
-    let budget = EQUAL_TIME_SAMPLES * measured[1].1.1;
     for (name, (relative, time)) in measured {
         let (mean, median) = mean_median(relative);
-        let samples = ((budget / time).round() as usize).max(1);
-        let equal = match name {
-            "power" => equal_time(&power, case, samples, &mut rng),
-            "pbrt-v4" => equal_time(&pbrt, case, samples, &mut rng),
-            "Cycles" => equal_time(&cycles, case, samples, &mut rng),
-            _ => equal_time(&ours, case, samples, &mut rng),
-        };
         rows.push(Row {
             name,
             mean,
             median,
             time,
-            equal_time: equal,
-            equal_samples: samples,
         });
     }
     println!("### {} ({} points)\n", case.name, case.queries.len());
     println!(
-        "| method | rel. variance, mean | median | time / sample | variance x time (pbrt = 1) | \
-         equal time: samples / point | mean sq. rel. error | pbrt / method |"
+        "| method | rel. variance, mean | median | time / sample | variance x time (pbrt = 1) \
+         | MSE at equal time, pbrt / method |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
-    let pbrt_row = (rows[1].mean * rows[1].time, rows[1].equal_time);
+    println!("|---|---|---|---|---|---|");
+    let pbrt_row = rows[1].mean * rows[1].time;
     for r in &rows {
+        let product = r.mean * r.time / pbrt_row;
         println!(
-            "| {} | {:.3e} | {:.3e} | {:.2} us | {:.3} | {} | {:.3e} | {:.2}x |",
+            "| {} | {:.3e} | {:.3e} | {:.2} us | {:.3} | {:.2}x |",
             r.name,
             r.mean,
             r.median,
             r.time * 1e6,
-            r.mean * r.time / pbrt_row.0,
-            r.equal_samples,
-            r.equal_time,
-            pbrt_row.1 / r.equal_time
+            product,
+            1.0 / product
         );
     }
     println!();

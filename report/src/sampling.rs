@@ -293,6 +293,57 @@ pub trait OneSample {
     /// One light for `query` from `u` in `[0, 1)`: its index in the
     /// caller's slice and its probability, or `None` (no sample).
     fn pick(&self, query: &Query<WithView>, u: f64) -> Option<(usize, f64)>;
+
+    /// Every light's probability at `query` into `out` (indexed as the
+    /// caller's slice, zeroed by the caller): what [`pick`](Self::pick)
+    /// returns for each, from one pass over the tree.
+    fn probabilities(&self, query: &Query<WithView>, out: &mut [f64]);
+}
+
+/// A node's children's probabilities, as [`descend_tree`]'s `weigh`.
+type Weigh<'a> = dyn FnMut(usize, &[Node], &mut [f64]) -> bool + 'a;
+/// A leaf's lights' probabilities, as [`descend_tree`]'s `leaf`.
+type LeafWeigh<'a> = dyn FnMut(usize, &[PointLight], &mut [f64]) -> bool + 'a;
+
+/// The probability of every light under [`descend_tree`]'s choices, written
+/// into `out` (indexed as the caller's slice): the same `weigh` and `leaf`
+/// at every node, the probabilities multiplied in the same order.
+fn walk_tree(tree: &LightTree, weigh: &mut Weigh<'_>, leaf: &mut LeafWeigh<'_>, out: &mut [f64]) {
+    fn visit(
+        tree: &LightTree,
+        index: usize,
+        pdf: f64,
+        weigh: &mut Weigh<'_>,
+        leaf: &mut LeafWeigh<'_>,
+        out: &mut [f64],
+    ) {
+        let nodes = tree.nodes();
+        let node = &nodes[index];
+        if node.is_leaf() {
+            let range = node.lights();
+            let mut p = vec![0.0; range.len()];
+            if leaf(range.start, &tree.lights()[range.clone()], &mut p) {
+                for (i, pi) in p.iter().enumerate() {
+                    out[tree.original_index(range.start + i)] = pdf * pi;
+                }
+            }
+            return;
+        }
+        let children = node.children();
+        let mut p = [0.0; 64];
+        let p = &mut p[..children.len()];
+        if !weigh(children.start, &nodes[children.clone()], p) {
+            return;
+        }
+        for (i, &pi) in p.iter().enumerate() {
+            if pi > 0.0 {
+                visit(tree, children.start + i, pdf * pi, weigh, leaf, out);
+            }
+        }
+    }
+    if !tree.nodes().is_empty() {
+        visit(tree, 0, 1.0, weigh, leaf, out);
+    }
 }
 
 /// `u` stretched back to `[0, 1)` over the interval `[below, below + p)`
@@ -363,6 +414,10 @@ impl OneSample for PowerPick {
         };
         Some((j, self.probability[j]))
     }
+
+    fn probabilities(&self, _: &Query<WithView>, out: &mut [f64]) {
+        out.copy_from_slice(&self.probability);
+    }
 }
 
 /// The crate's sampler ([`manylights::LightSampler`]) as a [`OneSample`].
@@ -375,6 +430,11 @@ impl<S: Shader> OneSample for CratePick<'_, S> {
     fn pick(&self, query: &Query<WithView>, u: f64) -> Option<(usize, f64)> {
         let s = self.sampler.sample(query, u)?;
         Some((s.light, s.pmf))
+    }
+
+    fn probabilities(&self, query: &Query<WithView>, out: &mut [f64]) {
+        self.sampler
+            .for_each_pmf(query, |light, pmf| out[light] = pmf);
     }
 }
 
@@ -744,31 +804,58 @@ fn normalise(out: &mut [f64]) -> bool {
     true
 }
 
+impl PbrtPick<'_> {
+    /// The probabilities of `children` (the first at node `first`) at
+    /// point `p` with normal `n`.
+    fn weigh(&self, p: DVec3, n: DVec3, first: usize, children: &[Node], out: &mut [f64]) -> bool {
+        for (w, b) in out
+            .iter_mut()
+            .zip(&self.nodes[first..first + children.len()])
+        {
+            *w = pbrt_importance(b, p, n);
+        }
+        normalise(out)
+    }
+
+    /// The probabilities of a leaf's `lights` (the first at leaf index
+    /// `first`).
+    fn leaf(
+        &self,
+        p: DVec3,
+        n: DVec3,
+        first: usize,
+        lights: &[PointLight],
+        out: &mut [f64],
+    ) -> bool {
+        for (w, b) in out
+            .iter_mut()
+            .zip(&self.lights[first..first + lights.len()])
+        {
+            *w = pbrt_importance(b, p, n);
+        }
+        normalise(out)
+    }
+}
+
 impl OneSample for PbrtPick<'_> {
     fn pick(&self, query: &Query<WithView>, u: f64) -> Option<(usize, f64)> {
         let (p, n) = (query.surface().point, query.surface().normal);
         descend_tree(
             self.tree,
             u,
-            |first, children, out| {
-                for (w, b) in out
-                    .iter_mut()
-                    .zip(&self.nodes[first..first + children.len()])
-                {
-                    *w = pbrt_importance(b, p, n);
-                }
-                normalise(out)
-            },
-            |first, lights, out| {
-                for (w, b) in out
-                    .iter_mut()
-                    .zip(&self.lights[first..first + lights.len()])
-                {
-                    *w = pbrt_importance(b, p, n);
-                }
-                normalise(out)
-            },
+            |first, children, out| self.weigh(p, n, first, children, out),
+            |first, lights, out| self.leaf(p, n, first, lights, out),
         )
+    }
+
+    fn probabilities(&self, query: &Query<WithView>, out: &mut [f64]) {
+        let (p, n) = (query.surface().point, query.surface().normal);
+        walk_tree(
+            self.tree,
+            &mut |first, children, out| self.weigh(p, n, first, children, out),
+            &mut |first, lights, out| self.leaf(p, n, first, lights, out),
+            out,
+        );
     }
 }
 
@@ -1117,43 +1204,69 @@ fn cycles_mix(out: &mut [f64], min: &[f64]) -> bool {
     true
 }
 
+impl CyclesPick<'_> {
+    /// The probabilities of `children` (the first at node `first`) at
+    /// point `p` with normal `n`.
+    fn weigh(&self, p: DVec3, n: DVec3, first: usize, children: &[Node], out: &mut [f64]) -> bool {
+        let mut min = [0.0f64; 64];
+        let cones = &self.nodes[first..first + children.len()];
+        for (((w, lo), child), cone) in out.iter_mut().zip(min.iter_mut()).zip(children).zip(cones)
+        {
+            (*w, *lo) = cycles_node_importance(child, cone, p, n);
+        }
+        cycles_mix(out, &min[..out.len()])
+    }
+
+    /// The probabilities of a leaf's `lights` (the first at leaf index
+    /// `first`).
+    fn leaf(
+        &self,
+        p: DVec3,
+        n: DVec3,
+        first: usize,
+        lights: &[PointLight],
+        out: &mut [f64],
+    ) -> bool {
+        let mut lows_kept = [0.0f64; 64];
+        let mut spare;
+        let lows = if lights.len() <= lows_kept.len() {
+            &mut lows_kept[..lights.len()]
+        } else {
+            spare = vec![0.0; lights.len()];
+            &mut spare[..]
+        };
+        let emitters = &self.lights[first..first + lights.len()];
+        for (((w, lo), light), emitter) in out
+            .iter_mut()
+            .zip(lows.iter_mut())
+            .zip(lights)
+            .zip(emitters)
+        {
+            (*w, *lo) = cycles_light_importance(light, emitter, p, n);
+        }
+        cycles_mix(out, lows)
+    }
+}
+
 impl OneSample for CyclesPick<'_> {
     fn pick(&self, query: &Query<WithView>, u: f64) -> Option<(usize, f64)> {
         let (p, n) = (query.surface().point, query.surface().normal);
-        let mut min = [0.0f64; 64];
-        let mut lows_kept = [0.0f64; 64];
         descend_tree(
             self.tree,
             u,
-            |first, children, out| {
-                let cones = &self.nodes[first..first + children.len()];
-                for (((w, lo), child), cone) in
-                    out.iter_mut().zip(min.iter_mut()).zip(children).zip(cones)
-                {
-                    (*w, *lo) = cycles_node_importance(child, cone, p, n);
-                }
-                cycles_mix(out, &min[..out.len()])
-            },
-            |first, lights, out| {
-                let mut spare;
-                let lows = if lights.len() <= lows_kept.len() {
-                    &mut lows_kept[..lights.len()]
-                } else {
-                    spare = vec![0.0; lights.len()];
-                    &mut spare[..]
-                };
-                let emitters = &self.lights[first..first + lights.len()];
-                for (((w, lo), light), emitter) in out
-                    .iter_mut()
-                    .zip(lows.iter_mut())
-                    .zip(lights)
-                    .zip(emitters)
-                {
-                    (*w, *lo) = cycles_light_importance(light, emitter, p, n);
-                }
-                cycles_mix(out, lows)
-            },
+            |first, children, out| self.weigh(p, n, first, children, out),
+            |first, lights, out| self.leaf(p, n, first, lights, out),
         )
+    }
+
+    fn probabilities(&self, query: &Query<WithView>, out: &mut [f64]) {
+        let (p, n) = (query.surface().point, query.surface().normal);
+        walk_tree(
+            self.tree,
+            &mut |first, children, out| self.weigh(p, n, first, children, out),
+            &mut |first, lights, out| self.leaf(p, n, first, lights, out),
+            out,
+        );
     }
 }
 

@@ -21,8 +21,9 @@ use crate::tree::{LightTree, MAX_CHILDREN, Node};
 /// and a poor importance costs at most a factor `1 / (1 - DEFENSIVE_SHARE)`
 /// of the second moment per level. `2^-8`: the loss (at most about 0.4% a
 /// level) stays below the run-to-run noise of the report's variances, and
-/// a level's smallest share, `2^-8 / 8 = 2^-11`, keeps the product of up to
-/// 97 levels above `f64::MIN_POSITIVE`.
+/// a level's smallest share, `(1 - NEAR_SHARE) 2^-8 / 8` (about
+/// `2^-11.1`), keeps the product of up to 90 levels and a light's share of
+/// a leaf of up to 32 above `f64::MIN_POSITIVE`.
 pub(crate) const DEFENSIVE_SHARE: f64 = 1.0 / 256.0;
 
 /// How wide a child's certified interval may be for its estimate to serve
@@ -52,6 +53,22 @@ pub(crate) const TIGHT_RATIO: f64 = 2.0;
 /// clamping at `R`, `R / 2`, `R / 4` and `R / 8` gave one-sample relative
 /// variances of about 10, 2.2, 1.9 and 1.9 (`docs/tuning.md`).
 pub(crate) const NEAR_DIVISOR: f64 = 4.0;
+
+/// Share of a choice among children spread evenly over those whose ball
+/// reaches the point and that are not leaves ([`Kind::Near`]): they have
+/// no bound, and their geometric importance, taken about the centroid,
+/// can be off by orders of magnitude either way, since what they give is
+/// often carried by the few lights nearest the point (a point on the floor
+/// a few centimetres from virtual lights at the foot of a wall). Each such
+/// child gets at least `NEAR_SHARE / m` of the choice among its `m` near
+/// siblings, at a cost of at most a factor `1 / (1 - NEAR_SHARE)` of the
+/// second moment at each level where one is present. 1/16 is the measured
+/// choice: on the VPL room at 10^5 virtual lights, shares 0, 1/16, 1/8 and
+/// 1/4 gave mean relative variances of 6.1, 2.9, 2.8 and 2.9, while the
+/// street city and the sphere of lights lost 2% at 1/16 and 4-5% at 1/8
+/// (`cargo run --release -p manylights-report -- sampling`,
+/// `docs/tuning.md`).
+pub(crate) const NEAR_SHARE: f64 = 1.0 / 16.0;
 
 /// The largest `f64` below 1: where a stretched `u` is clamped.
 pub(crate) const ONE_BELOW: f64 = 1.0 - f64::EPSILON / 2.0;
@@ -507,6 +524,15 @@ impl Step {
         for i in 0..len {
             p[i] = spread.share(importance[i], may[i]);
         }
+        // The near children's even share (they may all be lit: no bound
+        // says otherwise).
+        let near = kind[..len].iter().filter(|k| **k == Kind::Near).count();
+        if near > 0 {
+            let even = NEAR_SHARE / near as f64;
+            for (pi, k) in p.iter_mut().zip(&kind).take(len) {
+                *pi = (1.0 - NEAR_SHARE) * *pi + if *k == Kind::Near { even } else { 0.0 };
+            }
+        }
         Self { len, p }
     }
 }
@@ -516,10 +542,9 @@ impl Step {
 /// where the shader can ([`Shader::bound_children_coarse`]), else under
 /// their cones ([`Shader::bound_nodes`]); a child with no cone is
 /// [`Kind::Near`]. For emitters, each child also gets an estimate of its
-/// emission towards the point in `emission` (the profile at the node's
-/// mean axis: under the child's cone, [`LightTree::factor`]; where its
-/// ball reaches the point, for the direction from its centroid,
-/// [`LightTree::factor_towards`]), which scales its geometric importance:
+/// emission towards the point in `emission` ([`soft_emission`]; under the
+/// child's cone, clamped into the range [`LightTree::factor`] certifies),
+/// which scales its geometric importance:
 /// a node of lights aimed away from the point is worth less than its
 /// intensity says, as pbrt-v4's importance weighs a node by the cosine of
 /// its emission cone. (Virtual lights on a ceiling, facing down, seen
@@ -568,7 +593,7 @@ fn bound_wanted<S: Shader>(
             }
             None => {
                 kind[i] = Kind::Near;
-                emission[i] = tree.factor_towards(first + i, at.surface.point);
+                emission[i] = soft_emission(at, first + i, None);
             }
         }
     }
@@ -582,8 +607,55 @@ fn bound_wanted<S: Shader>(
     );
     for (k, (slot, bound)) in slots[..len].iter().zip(&bounds[..len]).enumerate() {
         let factor = tree.factor(first + *slot, &cones[k]);
-        emission[*slot] = factor.estimate;
+        emission[*slot] = soft_emission(at, first + *slot, Some((factor.lower, factor.upper)));
         kind[*slot] = bounded(&emitted(*bound, factor));
+    }
+}
+
+/// An estimate of node `index`'s emission towards the point, which scales
+/// its geometric importance: its members' profile at a *soft* cosine, the
+/// mean of `max(0, w . (p - x)) / D` over its members `x`, with `w` the
+/// node's mean axis, their heights along `w` modelled as uniform with the
+/// variance of the node's second moments (as [`soft_cosine`] models the
+/// heights above the tangent plane), and `D` the distance from the
+/// centroid (clamped as [`geometric`] clamps it). The profile at the
+/// direction from the centroid alone gives 0 to a node whose centroid
+/// lies behind the point's plane across `w` though some of its members lie
+/// in front of it (virtual lights on a wall seen from a point just off
+/// that wall, beside a cabinet's face), and the descent then starves the
+/// node that holds the point's nearest lights. `within`: the certified
+/// range of the members' profile from the point, where the node is
+/// bounded under a cone; the estimate is clamped into it.
+#[inline(always)]
+fn soft_emission<S: Shader>(at: &At<'_, S>, index: usize, within: Option<(f64, f64)>) -> f64 {
+    let tree = at.tree;
+    let Some(cone) = tree.node_cone(index) else {
+        return 1.0;
+    };
+    let (axis, two_sided) = cone.mean_axis();
+    let estimate = if cone.is_isotropic() {
+        1.0
+    } else if axis == DVec3::ZERO {
+        cone.estimate_at(0.0)
+    } else {
+        let node = &tree.nodes[index];
+        let offset = node.centroid.as_dvec3() - at.surface.point;
+        let clamp = f64::from(node.radius) / NEAR_DIVISOR;
+        let d2 = offset.length_squared().max(clamp * clamp);
+        if !(d2 > 0.0) {
+            return cone.estimate_at(1.0);
+        }
+        let front = soft_cosine(node, offset, d2, -axis);
+        let cosine = if two_sided {
+            (front + soft_cosine(node, offset, d2, axis)).min(1.0)
+        } else {
+            front
+        };
+        cone.estimate_at(cosine)
+    };
+    match within {
+        Some((lower, upper)) => estimate.max(lower).min(upper),
+        None => estimate,
     }
 }
 
@@ -867,5 +939,62 @@ pub(crate) fn probability<S: Shader>(at: &At<'_, S>, start: usize, light: usize)
         }
         p *= step.p[i];
         index = first + i;
+    }
+}
+
+/// Visits every light below node `start` (leaf order) with the probability
+/// that [`descend`] from `start` chooses it: the same steps as
+/// [`probability`] takes for each, in one pass over the tree, so each
+/// light's probability has the same bits as [`probability`] gives it. A
+/// child of probability 0 (certified dark, or below a dark start) passes
+/// 0 to each of its lights.
+pub(crate) fn each_probability<S: Shader>(
+    at: &At<'_, S>,
+    start: usize,
+    visit: &mut impl FnMut(usize, f64),
+) {
+    let Some(node) = at.tree.nodes.get(start) else {
+        return;
+    };
+    if start_is_dark(at, start) {
+        node.lights().for_each(|light| visit(light, 0.0));
+        return;
+    }
+    walk(at, start, 1.0, visit);
+}
+
+/// [`each_probability`] below node `index`, reached with probability `p`.
+fn walk<S: Shader>(at: &At<'_, S>, index: usize, p: f64, visit: &mut impl FnMut(usize, f64)) {
+    let tree = at.tree;
+    let node = &tree.nodes[index];
+    if node.is_leaf() {
+        let range = node.lights();
+        let mut buffer = [0.0; LEAF_BUFFER];
+        let (spread, any) = leaf_spread(at, range.clone(), &mut buffer);
+        let mut share = |light: usize, value: f64| {
+            visit(
+                light,
+                p * spread.share(sanitised(value), leaf_may(value, any)),
+            );
+        };
+        if range.len() <= LEAF_BUFFER {
+            for (k, &value) in buffer[..range.len()].iter().enumerate() {
+                share(range.start + k, value);
+            }
+        } else {
+            each_light(at, range, share);
+        }
+        return;
+    }
+    let step = Step::of(at, index);
+    let first = node.first_child as usize;
+    for (i, &pi) in step.p[..step.len].iter().enumerate() {
+        if pi == 0.0 {
+            tree.nodes[first + i]
+                .lights()
+                .for_each(|light| visit(light, 0.0));
+        } else {
+            walk(at, first + i, p * pi, visit);
+        }
     }
 }

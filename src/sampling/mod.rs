@@ -63,8 +63,12 @@ pub struct Sampled {
 /// the tangent plane modelled as uniform with the variance of the node's
 /// second moments (where the ball reaches the point, over the clamped
 /// distance and at least 1/4). Over emitters `g` is also scaled by the
-/// node's emission towards the point (its members' profile at the node's
-/// mean axis). `kappa` is
+/// node's emission towards the point: its members' profile at the node's
+/// mean axis for the mean clamped cosine of the point's height above
+/// their emitting planes, modelled as the heights above the tangent plane
+/// are, over the distance (the profile at the direction from the centroid
+/// alone starves a node whose centroid lies behind the point though its
+/// members nearest the point face it). `kappa` is
 /// the largest ratio of importance to `g` among the single or tightly
 /// bounded siblings (1 when none). The shader's estimate is close to the
 /// exact contribution where the interval is tight (far nodes); where it is
@@ -77,7 +81,15 @@ pub struct Sampled {
 /// A child is then chosen with probability `(1 - 2^-8) q / Q + 2^-8 / k`,
 /// `q` its importance, `Q` the sum over the `k` children that may be lit
 /// (defensive mixing: no lit child's share can round to 0, and a poor
-/// importance costs at most about 0.4% of the second moment per level). In
+/// importance costs at most about 0.4% of the second moment per level);
+/// where some children's balls reach the point (and they are not leaves),
+/// those `m` children also share `1/16` of the choice evenly: the choice is
+/// `(1 - 1/16)` times the above plus `1 / (16 m)` for each of them. Their
+/// importance has no bound to lean on, and what they give is often carried
+/// by the few lights nearest the point, which no estimate about their
+/// centroid sees; the even share keeps such a child's probability at
+/// least `1 / (16 m)` however far its importance misses, at a cost of at
+/// most 7% of the second moment per level. In
 /// a leaf, a light is chosen in proportion to its exact term
 /// ([`Shader::eval`], channels summed), mixed the same way over the lights
 /// that contribute.
@@ -88,11 +100,12 @@ pub struct Sampled {
 /// * a child certified dark is never chosen while a sibling may be lit;
 /// * every light whose exact term is positive has a positive probability:
 ///   each of its ancestors may be lit (its bound's upper end is at least
-///   that term), so gets at least `2^-8 / 8` of its parent's choice, and
-///   the light at least `2^-8 / n` of its leaf's `n`; the product stays
-///   above `f64::MIN_POSITIVE` for trees of up to 97 levels (the default
-///   builder's are far shallower: 8 levels for a million lights of the
-///   street city). So the one-sample estimate `f / pmf` is unbiased;
+///   that term), so gets at least `(15/16) 2^-8 / 8` of its parent's
+///   choice, and the light at least `2^-8 / n` of its leaf's `n`; the
+///   product stays above `f64::MIN_POSITIVE` for trees of up to 90 levels
+///   and leaves of up to 32 lights (the default builder's trees are far
+///   shallower: 8 levels for a million lights of the street city). So the
+///   one-sample estimate `f / pmf` is unbiased;
 /// * the probabilities of all lights sum to 1 (to rounding, about `1e-15`
 ///   per level) whenever `sample` returns a light. Bounds are conservative,
 ///   so a node that may be lit can have children all certified dark (a
@@ -215,5 +228,53 @@ impl<'t, S: Shader> LightSampler<'t, S> {
             #[inline(always)]
             || choice::probability(&at, 0, leaf as usize),
         )
+    }
+
+    /// Every light's probability at `query` in one pass over the tree:
+    /// `visit(light, pmf)` once for each light, `light` its index in the
+    /// caller's slice (visited in the tree's leaf order, not the slice's),
+    /// `pmf` the same bits as [`pmf`](Self::pmf) gives it. Costs the
+    /// bounds of every node's children and every light's exact term, once
+    /// (`pmf` for each light in turn would cost `O(depth)` each), and
+    /// allocates nothing.
+    ///
+    /// For checking a sampler (the probabilities sum to 1, no lit light has
+    /// probability 0) and for the one-sample estimate's exact variance,
+    /// `sum_i f_i^2 / pmf_i - F^2` with `F = sum_i f_i`: a variance
+    /// measured from samples misses the rare lights whose `f / pmf` is
+    /// huge, and so reads low exactly where a sampler is poor.
+    ///
+    /// ```
+    /// use glam::Vec3;
+    /// use manylights::{Lambert, LightTree, PointLight, Query};
+    ///
+    /// let lights: Vec<PointLight> = (0..500)
+    ///     .map(|i| PointLight::new(Vec3::new((i % 25) as f32, (i / 25) as f32, 2.0), Vec3::ONE))
+    ///     .collect();
+    /// let tree = LightTree::build(&lights)?;
+    /// let sampler = tree.sampler(Lambert::new(Vec3::splat(0.5)));
+    /// let query = Query::new(Vec3::new(3.0, 4.0, 0.0), Vec3::Z)?;
+    /// let mut total = 0.0;
+    /// sampler.for_each_pmf(&query, |light, pmf| {
+    ///     assert_eq!(pmf.to_bits(), sampler.pmf(&query, light).to_bits());
+    ///     total += pmf;
+    /// });
+    /// assert!((total - 1.0).abs() < 1e-12);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn for_each_pmf<M>(&self, query: &Query<M>, mut visit: impl FnMut(usize, f64))
+    where
+        S: Accepts<M>,
+    {
+        let at = At::new(self.tree, &self.shader, query.surface());
+        let tree = self.tree;
+        crate::dispatch::with_avx2(
+            #[inline(always)]
+            || {
+                choice::each_probability(&at, 0, &mut |leaf, pmf| {
+                    visit(tree.original_index(leaf), pmf);
+                });
+            },
+        );
     }
 }

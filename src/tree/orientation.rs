@@ -206,6 +206,37 @@ impl NodeCone {
             && (self.kinds & HAS_SPOT == 0 || c <= f64::from(self.outer[0]))
     }
 
+    /// An estimate (not a bound) of the members' profile for a direction
+    /// at cosine `cosine` to the node's mean axis: the value
+    /// [`factor_within`](Self::factor_within) estimates for such a
+    /// direction, which for a single kind of profile is that profile at the
+    /// middle of the node's parameter ranges. 1 for isotropic members; for
+    /// members whose axes have no mean, the estimate at a right angle.
+    #[inline]
+    pub(crate) fn estimate_at(&self, cosine: f64) -> f64 {
+        if self.is_isotropic() {
+            return 1.0;
+        }
+        let w = self.axis;
+        let c = if cosine >= -1.0 { cosine.min(1.0) } else { 0.0 };
+        let towards = if w == DVec3::ZERO {
+            DVec3::X
+        } else {
+            c * w + (1.0 - c * c).max(0.0).sqrt() * w.any_orthonormal_vector()
+        };
+        self.factor_within(towards, 0.0, 1.0).estimate
+    }
+
+    /// The unit mean axis (zero where the members' axes have none), and
+    /// whether every oriented member is two-sided.
+    #[inline]
+    pub(crate) fn mean_axis(&self) -> (DVec3, bool) {
+        (
+            self.axis,
+            self.kinds & HAS_TWO_SIDED != 0 && self.kinds & HAS_ONE_SIDED == 0,
+        )
+    }
+
     /// Bounds every member's profile value at the point from which the
     /// node's ball is seen under `cone`: each member's direction to the
     /// point lies within the cone's half-angle `delta` of the direction
@@ -349,22 +380,11 @@ impl LightTree {
         }
     }
 
-    /// An estimate (not a bound) of node `index`'s emission towards
-    /// `point`: its members' profile at the node's mean axis for the
-    /// direction from its centroid to the point, as a light sampler's
-    /// importance takes it where the node's ball reaches the point and no
-    /// cone bounds the directions. 1 for a tree of isotropic lights, or at
-    /// the centroid itself.
+    /// Node `index`'s orientation cone, `None` for a tree of isotropic
+    /// lights.
     #[inline]
-    pub(crate) fn factor_towards(&self, index: usize, point: DVec3) -> f64 {
-        let Some(o) = &self.orientation else {
-            return 1.0;
-        };
-        let towards = (point - self.nodes[index].centroid.as_dvec3()).normalize_or_zero();
-        if towards == DVec3::ZERO {
-            return 1.0;
-        }
-        o.cones[index].factor_within(towards, 0.0, 1.0).estimate
+    pub(crate) fn node_cone(&self, index: usize) -> Option<&NodeCone> {
+        self.orientation.as_ref().map(|o| &o.cones[index])
     }
 
     /// The emission profiles' bounds of node `index` over every point

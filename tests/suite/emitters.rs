@@ -359,6 +359,13 @@ proptest! {
             }
             sum += p;
         }
+        let mut visited = 0;
+        let mut same = true;
+        sampler.for_each_pmf(&q, |light, pmf| {
+            visited += 1;
+            same &= pmf.to_bits() == sampler.pmf(&q, light).to_bits();
+        });
+        prop_assert!(visited == emitters.len() && same, "for_each_pmf against pmf");
         match sampler.sample(&q, 0.5) {
             Some(s) => {
                 prop_assert!((sum - 1.0).abs() <= 1e-12, "{sum}");

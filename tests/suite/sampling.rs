@@ -52,6 +52,19 @@ fn check_query<S: Shader + manylights::query::Accepts<M>, M>(
         }
         sum += p;
     }
+    let mut visited = vec![0u32; lights.len()];
+    let mut mismatch = None;
+    sampler.for_each_pmf(query, |light, pmf| {
+        visited[light] += 1;
+        if pmf.to_bits() != sampler.pmf(query, light).to_bits() {
+            mismatch = Some((light, pmf));
+        }
+    });
+    prop_assert!(
+        visited.iter().all(|&v| v == 1),
+        "for_each_pmf visits every light once"
+    );
+    prop_assert_eq!(mismatch, None, "for_each_pmf differs from pmf");
     let first = sampler.sample(query, 0.5);
     if first.is_some() {
         prop_assert!((sum - 1.0).abs() <= 1e-12, "probabilities sum to {sum}");
@@ -119,6 +132,51 @@ proptest! {
         let ggx = manylights::Ggx::new(Vec3::new(0.9, 0.6, 0.3), log_alpha.exp());
         check_query(&tree.sampler(ggx), &lights, &query)?;
     }
+}
+
+/// Instant radiosity's virtual lights in a furnished room (10^5 cosine
+/// lobes on every surface, four primary lights: the report's VPL room):
+/// the one-sample estimate's exact relative variance (`sum f^2 / pmf` over
+/// every light, from `for_each_pmf`, over `F^2`, less 1) stays moderate at each of
+/// 128 points of the room's surfaces (the largest is 28). Points just off
+/// a wall or near a corner lie in front of the virtual lights nearest them
+/// but behind the centroid of the node holding them; an importance that
+/// took each node's emission towards the point from its centroid alone
+/// gave those nodes only the defensive share at several levels, with
+/// relative variances of 3e8 to 3e10 at the four worst points, which a
+/// variance measured from a few thousand samples does not see. Without the
+/// near children's even share the largest was 352: a floor point 5 cm
+/// from the virtual lights at the foot of a wall, one of which gives a
+/// third of its light.
+#[test]
+fn virtual_lights_near_the_point_are_not_starved() {
+    use manylights::Emitter;
+    use manylights_report::scenes::Room;
+    let room = Room::new();
+    let emitters: Vec<Emitter> = room.emitters(100_000, manylights_report::config::SEED);
+    let tree = LightTree::build_emitters(&emitters).unwrap();
+    let lambert = Lambert::new(Vec3::splat(0.5));
+    let sampler = tree.sampler(lambert);
+    let mut worst: f64 = 0.0;
+    for (point, normal) in room.points(128, manylights_report::config::SEED) {
+        let query = Query::new(point, normal).unwrap();
+        let mut pmf = vec![0.0; emitters.len()];
+        sampler.for_each_pmf(&query, |light, p| pmf[light] = p);
+        let (mut exact, mut second) = (0.0, 0.0);
+        for (e, &p) in emitters.iter().zip(&pmf) {
+            let f = term(&lambert, query.surface(), &e.light);
+            let f = (f.x + f.y + f.z) * e.emission.factor(e.light.position, point);
+            if f > 0.0 {
+                assert!(p > 0.0, "a lit light with probability 0 at {point}");
+                exact += f;
+                second += f * f / p;
+            }
+        }
+        if exact > 0.0 {
+            worst = worst.max(second / (exact * exact) - 1.0);
+        }
+    }
+    assert!(worst < 100.0, "relative variance {worst} at some point");
 }
 
 /// The chi-square statistic's critical value for `dof` degrees of freedom
