@@ -184,6 +184,20 @@ fn estimate(
     let Some((index, pmf)) = method.pick(query, u) else {
         return 0.0;
     };
+    term(lambert, lights, emission, index, query) / pmf
+}
+
+/// Light `index`'s exact term at `query`, channels summed: its Lambert term
+/// times its profile's factor (the model's, [`Emission::factor`]) when
+/// `emission` has the lights' profiles.
+#[inline]
+fn term(
+    lambert: &Lambert,
+    lights: &[PointLight],
+    emission: &[Emission],
+    index: usize,
+    query: &Query<WithView>,
+) -> f64 {
     let light = &lights[index];
     let f = lambert.eval(
         &(),
@@ -194,7 +208,7 @@ fn estimate(
     let factor = emission
         .get(index)
         .map_or(1.0, |e| e.factor(light.position, query.point()));
-    (f.x + f.y + f.z) * factor / pmf
+    sum(f) * factor
 }
 
 /// Channels summed.
@@ -228,25 +242,11 @@ fn variances(method: &(impl OneSample + Sync), case: &Case, rng: &mut SceneRng) 
             let mut pmf = vec![0.0; case.lights.len()];
             method.probabilities(query, &mut pmf);
             let (mut exact, mut second) = (0.0, 0.0);
-            for (i, light) in case.lights.iter().enumerate() {
-                let f = lambert.eval(
-                    &(),
-                    query.surface(),
-                    light.position.as_dvec3(),
-                    light.intensity.as_dvec3(),
-                );
-                let factor = case
-                    .emission
-                    .get(i)
-                    .map_or(1.0, |e| e.factor(light.position, query.point()));
-                let f = sum(f) * factor;
+            for (i, &p) in pmf.iter().enumerate() {
+                let f = term(&lambert, &case.lights, &case.emission, i, query);
                 if f > 0.0 {
                     exact += f;
-                    second += if pmf[i] > 0.0 {
-                        f * f / pmf[i]
-                    } else {
-                        f64::INFINITY
-                    };
+                    second += if p > 0.0 { f * f / p } else { f64::INFINITY };
                 }
             }
             (exact > 0.0).then(|| (second / (exact * exact) - 1.0).max(0.0))

@@ -300,6 +300,50 @@ pub trait OneSample {
     fn probabilities(&self, query: &Query<WithView>, out: &mut [f64]);
 }
 
+/// A sampler that descends the crate's tree choosing each node's children
+/// and a leaf's lights by probabilities at the shading point (pbrt-v4's and
+/// Cycles' importances): a [`OneSample`] by [`descend_tree`] and
+/// [`walk_tree`].
+trait TreeWeights {
+    /// The tree.
+    fn tree(&self) -> &LightTree;
+    /// The probabilities of `children` (the first at node `first`) at
+    /// point `p` with normal `n`; `false` for no sample.
+    fn weigh(&self, p: DVec3, n: DVec3, first: usize, children: &[Node], out: &mut [f64]) -> bool;
+    /// The probabilities of a leaf's `lights` (the first at leaf index
+    /// `first`); `false` for no sample.
+    fn leaf(
+        &self,
+        p: DVec3,
+        n: DVec3,
+        first: usize,
+        lights: &[PointLight],
+        out: &mut [f64],
+    ) -> bool;
+}
+
+impl<T: TreeWeights> OneSample for T {
+    fn pick(&self, query: &Query<WithView>, u: f64) -> Option<(usize, f64)> {
+        let (p, n) = (query.surface().point, query.surface().normal);
+        descend_tree(
+            self.tree(),
+            u,
+            |first, children, out| self.weigh(p, n, first, children, out),
+            |first, lights, out| self.leaf(p, n, first, lights, out),
+        )
+    }
+
+    fn probabilities(&self, query: &Query<WithView>, out: &mut [f64]) {
+        let (p, n) = (query.surface().point, query.surface().normal);
+        walk_tree(
+            self.tree(),
+            &mut |first, children, out| self.weigh(p, n, first, children, out),
+            &mut |first, lights, out| self.leaf(p, n, first, lights, out),
+            out,
+        );
+    }
+}
+
 /// A node's children's probabilities, as [`descend_tree`]'s `weigh`.
 type Weigh<'a> = dyn FnMut(usize, &[Node], &mut [f64]) -> bool + 'a;
 /// A leaf's lights' probabilities, as [`descend_tree`]'s `leaf`.
@@ -804,9 +848,11 @@ fn normalise(out: &mut [f64]) -> bool {
     true
 }
 
-impl PbrtPick<'_> {
-    /// The probabilities of `children` (the first at node `first`) at
-    /// point `p` with normal `n`.
+impl TreeWeights for PbrtPick<'_> {
+    fn tree(&self) -> &LightTree {
+        self.tree
+    }
+
     fn weigh(&self, p: DVec3, n: DVec3, first: usize, children: &[Node], out: &mut [f64]) -> bool {
         for (w, b) in out
             .iter_mut()
@@ -817,8 +863,6 @@ impl PbrtPick<'_> {
         normalise(out)
     }
 
-    /// The probabilities of a leaf's `lights` (the first at leaf index
-    /// `first`).
     fn leaf(
         &self,
         p: DVec3,
@@ -834,28 +878,6 @@ impl PbrtPick<'_> {
             *w = pbrt_importance(b, p, n);
         }
         normalise(out)
-    }
-}
-
-impl OneSample for PbrtPick<'_> {
-    fn pick(&self, query: &Query<WithView>, u: f64) -> Option<(usize, f64)> {
-        let (p, n) = (query.surface().point, query.surface().normal);
-        descend_tree(
-            self.tree,
-            u,
-            |first, children, out| self.weigh(p, n, first, children, out),
-            |first, lights, out| self.leaf(p, n, first, lights, out),
-        )
-    }
-
-    fn probabilities(&self, query: &Query<WithView>, out: &mut [f64]) {
-        let (p, n) = (query.surface().point, query.surface().normal);
-        walk_tree(
-            self.tree,
-            &mut |first, children, out| self.weigh(p, n, first, children, out),
-            &mut |first, lights, out| self.leaf(p, n, first, lights, out),
-            out,
-        );
     }
 }
 
@@ -1204,9 +1226,11 @@ fn cycles_mix(out: &mut [f64], min: &[f64]) -> bool {
     true
 }
 
-impl CyclesPick<'_> {
-    /// The probabilities of `children` (the first at node `first`) at
-    /// point `p` with normal `n`.
+impl TreeWeights for CyclesPick<'_> {
+    fn tree(&self) -> &LightTree {
+        self.tree
+    }
+
     fn weigh(&self, p: DVec3, n: DVec3, first: usize, children: &[Node], out: &mut [f64]) -> bool {
         let mut min = [0.0f64; 64];
         let cones = &self.nodes[first..first + children.len()];
@@ -1217,8 +1241,6 @@ impl CyclesPick<'_> {
         cycles_mix(out, &min[..out.len()])
     }
 
-    /// The probabilities of a leaf's `lights` (the first at leaf index
-    /// `first`).
     fn leaf(
         &self,
         p: DVec3,
@@ -1245,28 +1267,6 @@ impl CyclesPick<'_> {
             (*w, *lo) = cycles_light_importance(light, emitter, p, n);
         }
         cycles_mix(out, lows)
-    }
-}
-
-impl OneSample for CyclesPick<'_> {
-    fn pick(&self, query: &Query<WithView>, u: f64) -> Option<(usize, f64)> {
-        let (p, n) = (query.surface().point, query.surface().normal);
-        descend_tree(
-            self.tree,
-            u,
-            |first, children, out| self.weigh(p, n, first, children, out),
-            |first, lights, out| self.leaf(p, n, first, lights, out),
-        )
-    }
-
-    fn probabilities(&self, query: &Query<WithView>, out: &mut [f64]) {
-        let (p, n) = (query.surface().point, query.surface().normal);
-        walk_tree(
-            self.tree,
-            &mut |first, children, out| self.weigh(p, n, first, children, out),
-            &mut |first, lights, out| self.leaf(p, n, first, lights, out),
-            out,
-        );
     }
 }
 
