@@ -3,6 +3,8 @@
 //! lights, glTF spot lights), what a light carries of one, and the exact
 //! value the model multiplies a light's term by.
 
+use core::f64::consts::FRAC_PI_2;
+
 use glam::{DVec3, Vec3};
 
 use crate::PointLight;
@@ -58,7 +60,9 @@ pub enum Emission {
         /// most `outer_angle`.
         inner_angle: f32,
         /// Angle from the axis, in radians, past which the spot is dark
-        /// (glTF's `outerConeAngle`), above 0 and at most `pi / 2`.
+        /// (glTF's `outerConeAngle`), above 0 and at most `pi / 2`
+        /// (`std::f32::consts::FRAC_PI_2`, which rounds up, is taken as
+        /// `pi / 2`).
         outer_angle: f32,
         /// Whether the spot emits along both ends of its axis.
         two_sided: bool,
@@ -163,7 +167,9 @@ impl Emission {
                 outer_angle,
                 two_sided,
             } => {
-                if !(outer_angle > 0.0 && f64::from(outer_angle) <= core::f64::consts::FRAC_PI_2) {
+                // `f32`'s `FRAC_PI_2` lies just above pi/2; it is taken as
+                // pi/2.
+                if !(outer_angle > 0.0 && outer_angle <= core::f32::consts::FRAC_PI_2) {
                     return Err("spot outer angle must be in (0, pi/2]");
                 }
                 if !(inner_angle >= 0.0) {
@@ -174,8 +180,8 @@ impl Emission {
                 }
                 Profile {
                     axis: unit(axis)?,
-                    a: f64::from(outer_angle).cos() as f32,
-                    b: f64::from(inner_angle).cos() as f32,
+                    a: f64::from(outer_angle).min(FRAC_PI_2).cos() as f32,
+                    b: f64::from(inner_angle).min(FRAC_PI_2).cos() as f32,
                     kind: Kind::Spot,
                     two_sided,
                 }
@@ -393,6 +399,20 @@ mod tests {
             assert_eq!(e.factor(Vec3::Z, Vec3::ZERO), 0.0);
         }
         assert!(Emission::spot(Vec3::Z, 0.5, 0.5).profile().is_ok());
+        // f32's pi/2 (just above pi/2) is a right angle: glTF's widest spot.
+        let right = core::f32::consts::FRAC_PI_2;
+        for inner in [0.0, right] {
+            let p = Emission::spot(Vec3::Z, inner, right).profile().unwrap();
+            assert!(p.a >= 0.0 && p.a < 1e-7);
+            let e = Emission::spot(Vec3::Z, inner, right);
+            let above = e.factor(Vec3::ZERO, Vec3::new(1.0, 0.0, 1e-3));
+            assert!(if inner > 0.0 {
+                above == 1.0
+            } else {
+                above > 0.0 && above < 1e-5
+            });
+            assert_eq!(e.factor(Vec3::ZERO, Vec3::new(1.0, 0.0, -1e-3)), 0.0);
+        }
         assert!(Emission::cosine(Vec3::splat(1e30), 1e4).profile().is_ok());
     }
 }

@@ -167,8 +167,9 @@
 //!   shading arithmetic are `f64`, so sums of many lights near `f32::MAX`
 //!   neither overflow nor lose the bound.
 //! * Emission: axes finite and non-zero, cosine exponents `0 ..= 1e4`, spot
-//!   angles `0 <= inner <= outer <= pi/2` with `outer > 0`; anything else
-//!   is refused at build time ([`BuildError::InvalidEmission`]).
+//!   angles `0 <= inner <= outer <= pi/2` with `outer > 0` (`f32`'s
+//!   `FRAC_PI_2`, just above pi/2, counts as pi/2); anything else is
+//!   refused at build time ([`BuildError::InvalidEmission`]).
 //! * Phong exponents `0 ..= 1e6` ([`Phong::MAX_EXPONENT`]); GGX roughness
 //!   `1e-3 ..= 1` and `F0` in `[0, 1]` per channel ([`Ggx`]).
 //! * Results are `f64` ([`glam::DVec3`]). A result is infinite only where the
@@ -196,12 +197,14 @@
 //! cut does not pay point by point.
 //!
 //! Emitters cost more per evaluation than isotropic lights: their lights
-//! are summed in `f64` with each profile's value (the `f32` light sums and
-//! children's bounds are for isotropic lights), each node bound adds its
-//! profile range, and near a point a node whose members' cones may or may
-//! not reach it is summed light by light. Nodes aimed away from a point
-//! cost one evaluation and no light; a diffuse shader bounds a node of
-//! diffuse VPLs about one axis to second order.
+//! are summed in `f64` with each profile's value (the `f32` light sums are
+//! for isotropic lights), each node bound adds its profile range (from the
+//! node's ball and from its box's extent along the members' mean axis),
+//! and near a point a node whose members' cones may or may not reach it
+//! is summed light by light. Nodes aimed away from a point cost one
+//! evaluation and no light, so spot lamps, dark at most points, cost far
+//! fewer evaluations than isotropic ones; a diffuse shader bounds a node
+//! of diffuse VPLs about one axis to second order.
 //!
 //! # Feature flags
 //!

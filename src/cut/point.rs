@@ -157,7 +157,7 @@ impl<S: Shader> Point<'_, S> {
     fn factor_of(&self, tree: &LightTree, index: usize, cone: &Cone) -> Factor {
         match self.emitters.map(|e| e.cache[index % CHILDREN].get()) {
             Some((i, f)) if i as usize == index => f,
-            _ => tree.factor(index, cone),
+            _ => tree.factor_at(index, self.surface.point, cone),
         }
     }
 }
@@ -304,7 +304,7 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
             return false;
         }
         let factor = node.cone(region.surface.point).map(|cone| {
-            let f = cut.tree.factor(index, &cone);
+            let f = cut.tree.factor_at(index, region.surface.point, &cone);
             region.remember(index, f);
             f
         });
@@ -384,31 +384,37 @@ impl<'a, S: Shader> Region<S> for Point<'a, S> {
         let first = tree.nodes[parent].first_child as usize;
         let lanes = (0..CHILDREN).filter(|i| wanted & (1 << i) != 0);
         let oriented = tree.is_oriented();
-        if cut.region.coarse.is_some() && cut.work.nodes <= COARSE_NODES_MAX && !oriented {
-            let mut bounds = [None; CHILDREN];
-            let region = &cut.region;
-            let children = ChildrenOf {
-                tree,
-                parent,
-                wanted,
-            };
-            if cut.shader.bound_children_coarse(
-                Seal,
-                &region.per_point,
-                region.surface,
-                children,
-                &mut bounds,
-            ) {
-                for i in lanes {
-                    let entry = match &bounds[i] {
-                        Some(bound) => cut.bounded(first + i, visible, weight, bound),
-                        None => Some(cut.unbounded(first + i, visible)),
-                    };
-                    if let Some(entry) = entry {
-                        pending.pending(entry);
-                    }
+        if cut.region.coarse.is_some() && cut.work.nodes <= COARSE_NODES_MAX {
+            if oriented {
+                if coarse_emitters(cut, parent, wanted, visible, weight, pending) {
+                    return;
                 }
-                return;
+            } else {
+                let mut bounds = [None; CHILDREN];
+                let region = &cut.region;
+                let children = ChildrenOf {
+                    tree,
+                    parent,
+                    wanted,
+                };
+                if cut.shader.bound_children_coarse(
+                    Seal,
+                    &region.per_point,
+                    region.surface,
+                    children,
+                    &mut bounds,
+                ) {
+                    for i in lanes {
+                        let entry = match &bounds[i] {
+                            Some(bound) => cut.bounded(first + i, visible, weight, bound),
+                            None => Some(cut.unbounded(first + i, visible)),
+                        };
+                        if let Some(entry) = entry {
+                            pending.pending(entry);
+                        }
+                    }
+                    return;
+                }
             }
         }
         for i in lanes {
@@ -696,6 +702,68 @@ impl<'p, S: Shader, V: Visibility> Cut<'_, S, V, Point<'p, S>> {
             }
         }
     }
+}
+
+/// [`Region::bound_children`] for a tree of emitters through the shader's
+/// coarse bound of the children ([`Shader::bound_children_coarse`]): each
+/// child's factor first (a child whose members all aim away is exactly 0,
+/// and one whose ball holds the point has none: it enters unbounded), then
+/// each coarse isotropic interval scaled by its factor, as
+/// `bound_waiting` scales the `f64` ones. `false` (nothing done) where the
+/// shader has no coarse bound for these children.
+#[inline(always)]
+fn coarse_emitters<S: Shader, V: Visibility>(
+    cut: &mut Cut<'_, S, V, Point<'_, S>>,
+    parent: usize,
+    wanted: u8,
+    visible: bool,
+    weight: f64,
+    pending: &mut impl Pending,
+) -> bool {
+    let tree = cut.tree;
+    let first = tree.nodes[parent].first_child as usize;
+    let lanes = (0..CHILDREN).filter(|i| wanted & (1 << i) != 0);
+    let mut factors = [(Factor::ONE, None); CHILDREN];
+    let mut lit = wanted;
+    for i in lanes.clone() {
+        let child = first + i;
+        factors[i] = match tree.nodes[child].cone(cut.region.surface.point) {
+            Some(cone) => (cut.region.factor_of(tree, child, &cone), Some(cone)),
+            None => (Factor::ONE, None),
+        };
+        if factors[i].0.upper <= 0.0 {
+            lit &= !(1 << i);
+        }
+    }
+    let mut bounds = [None; CHILDREN];
+    let region = &cut.region;
+    let children = ChildrenOf {
+        tree,
+        parent,
+        wanted: lit,
+    };
+    if !cut.shader.bound_children_coarse(
+        Seal,
+        &region.per_point,
+        region.surface,
+        children,
+        &mut bounds,
+    ) {
+        return false;
+    }
+    for i in lanes.filter(|i| lit & (1 << i) != 0) {
+        let entry = match (&bounds[i], &factors[i]) {
+            (Some(bound), (factor, Some(cone))) => {
+                let bound = cut.region.oriented(tree, first + i, cone, *bound, *factor);
+                cut.bounded(first + i, visible, weight, &bound)
+            }
+            _ => Some(cut.unbounded(first + i, visible)),
+        };
+        if let Some(entry) = entry {
+            pending.pending(entry);
+        }
+    }
+    true
 }
 
 /// The most children bounded together: an octree's.

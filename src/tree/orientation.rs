@@ -9,7 +9,7 @@ use glam::{DVec3, Vec3};
 
 use super::layout::LightTree;
 use crate::emission::{Kind, Profile, lobe, spot};
-use crate::geometry::Cone;
+use crate::geometry::{Aabb, Cone};
 
 /// Added to every angle the bound derives (radians): it covers the
 /// rounding of the stored axes and of the angles' own computation, and the
@@ -93,6 +93,11 @@ fn angle(a: DVec3, b: DVec3) -> f64 {
 /// A few ulps of a cosine or sine near 1: what the angle-sum formulas and
 /// the square roots below may err by, moved outward.
 const TRIG_SLACK: f64 = 8.0 * f64::EPSILON;
+
+/// The relative rounding allowance of [`NodeCone::box_cosines`]'s
+/// numerators (of their terms' magnitude) and distances: `2^-49`, sixteen
+/// `f64` ulps, over the few roundings each takes.
+const BOX_SLACK: f64 = 1.0 / (1u64 << 49) as f64;
 
 impl NodeCone {
     /// The cone of the lights with `profiles`.
@@ -249,6 +254,77 @@ impl NodeCone {
         self.factor_within(-cone.axis, cone.sin_half_angle, cone.cos_half_angle)
     }
 
+    /// The bound of [`factor_within`](Self::factor_within) for the
+    /// directions `cone` (a unit vector and the sine and cosine of the
+    /// angle about it), narrowed by the members' box `aabb` seen from
+    /// every point within `reach` of `point` (0 for the point alone; see
+    /// [`box_cosines`](Self::box_cosines)).
+    #[inline]
+    pub(crate) fn factor_boxed(
+        &self,
+        cone: (DVec3, f64, f64),
+        aabb: &Aabb,
+        point: DVec3,
+        reach: f64,
+    ) -> Factor {
+        let (towards, sin, cos) = cone;
+        let boxed = self.box_cosines(aabb, point, reach);
+        self.factor_within_box(towards, sin, cos, boxed)
+    }
+
+    /// The range of `w . (q - x) / |q - x|` over every member position `x`
+    /// in `aabb` and every point `q` within `reach` of `point`, `w` the
+    /// node's mean axis, rounded outward; `None` where the axis has no
+    /// mean or the box reaches a point (no direction is then excluded).
+    ///
+    /// The numerator lies within `w . point - [max, min] of w . x over the
+    /// box` (the box's support in `w`'s direction), widened by `reach`
+    /// (`|w| = 1`); the distance within `[d_min - reach, d_max + reach]`,
+    /// `d_min` and `d_max` from the point to the box's nearest point and
+    /// farthest corner. A numerator's bound of either sign is divided by
+    /// the distance bound that makes the quotient largest (or least). A
+    /// thin node (the lamps of a street at one height, virtual lights on a
+    /// wall) is bounded this way far closer than by its ball: the support
+    /// is exact along the thin direction. Rounding: the numerator's terms
+    /// are at most `mag = sum |w_i| (|p_i| + max |x_i|) + reach` and its
+    /// computation a few roundings of them, covered by `2^-49 mag`; the
+    /// distances are within a few ulps, covered by a relative `2^-49`.
+    #[inline]
+    pub(crate) fn box_cosines(&self, aabb: &Aabb, point: DVec3, reach: f64) -> Option<(f64, f64)> {
+        let w = self.axis;
+        if w == DVec3::ZERO {
+            return None;
+        }
+        let (lo, hi) = (aabb.min.as_dvec3(), aabb.max.as_dvec3());
+        let (near, far) = (
+            DVec3::select(w.cmpge(DVec3::ZERO), lo, hi),
+            DVec3::select(w.cmpge(DVec3::ZERO), hi, lo),
+        );
+        let wp = w.dot(point);
+        let mag = (w.abs() * (point.abs() + lo.abs().max(hi.abs()))).element_sum() + reach;
+        let slack = mag * BOX_SLACK;
+        let n_hi = wp - w.dot(near) + reach + slack;
+        let n_lo = wp - w.dot(far) - reach - slack;
+        let gap = (lo - point).max(point - hi).max(DVec3::ZERO);
+        let d_min = gap.length() * (1.0 - BOX_SLACK) - reach;
+        let d_max = (point - lo).abs().max((point - hi).abs()).length() * (1.0 + BOX_SLACK) + reach;
+        if !(d_min > 0.0) || !d_max.is_finite() {
+            return None;
+        }
+        let up = 1.0 + BOX_SLACK;
+        let hi_c = if n_hi >= 0.0 {
+            n_hi / d_min * up
+        } else {
+            n_hi / d_max / up
+        };
+        let lo_c = if n_lo >= 0.0 {
+            n_lo / d_max / up
+        } else {
+            n_lo / d_min * up
+        };
+        Some((lo_c.max(-1.0), hi_c.min(1.0)))
+    }
+
     /// [`factor`](Self::factor) for every direction from a member to a
     /// point within the angle `delta` (given by its sine and cosine, `delta
     /// <= pi / 2`) of the unit vector `towards`.
@@ -262,6 +338,22 @@ impl NodeCone {
     /// more than the rounding of a light's cosine in the model.
     #[inline]
     pub(crate) fn factor_within(&self, towards: DVec3, sin_delta: f64, cos_delta: f64) -> Factor {
+        self.factor_within_box(towards, sin_delta, cos_delta, None)
+    }
+
+    /// [`factor_within`](Self::factor_within), the range of the cosine
+    /// between the mean axis and every direction also within `boxed` where
+    /// given ([`box_cosines`](Self::box_cosines)): a member's angle to its
+    /// own axis is then also within the spread of `[acos hi, acos lo]`, and
+    /// the tighter of the two ranges holds.
+    #[inline]
+    pub(crate) fn factor_within_box(
+        &self,
+        towards: DVec3,
+        sin_delta: f64,
+        cos_delta: f64,
+        boxed: Option<(f64, f64)>,
+    ) -> Factor {
         if self.is_isotropic() {
             return Factor::ONE;
         }
@@ -275,12 +367,27 @@ impl NodeCone {
             (1.0, -1.0, 0.0)
         } else {
             let (cos_psi, sin_psi) = (w.dot(towards), w.cross(towards).length());
-            let least = if cos_psi >= cos_sigma {
+            let mut least = if cos_psi >= cos_sigma {
                 // psi <= sigma: the axis itself is among the directions.
                 1.0
             } else {
                 (cos_psi * cos_sigma + sin_psi * sin_sigma + 4.0 * TRIG_SLACK).min(1.0)
             };
+            // The same from the box: the least angle to the mean axis is at
+            // least acos(hi), to a member's axis at least that less the
+            // spread.
+            let mut box_most = -1.0f64;
+            if let Some((lo, hi)) = boxed {
+                if hi < cos_s {
+                    let sin_hi = (1.0 - hi * hi).max(0.0).sqrt();
+                    least = least.min((hi * cos_s + sin_hi * sin_s + 4.0 * TRIG_SLACK).min(1.0));
+                }
+                let sin_lo = (1.0 - lo * lo).max(0.0).sqrt();
+                // sin(acos(lo) + spread) <= 0: the angle may reach pi.
+                if sin_lo * cos_s + lo * sin_s > TRIG_SLACK {
+                    box_most = (lo * cos_s - sin_lo * sin_s - 4.0 * TRIG_SLACK).max(-1.0);
+                }
+            }
             if self.dark_at(least) {
                 // Most nodes the cut bounds far from a spot's cone end here.
                 return Factor {
@@ -294,7 +401,8 @@ impl NodeCone {
                 -1.0
             } else {
                 (cos_psi * cos_sigma - sin_psi * sin_sigma - 4.0 * TRIG_SLACK).max(-1.0)
-            };
+            }
+            .max(box_most);
             (least, most, cos_psi)
         };
         // The greatest and least cosine any member's profile sees.
@@ -370,13 +478,29 @@ fn seen_within(offset: DVec3, reach: f64) -> (DVec3, f64, f64) {
 }
 
 impl LightTree {
-    /// The emission profiles' bounds of node `index` seen under `cone`:
-    /// [`Factor::ONE`] for a tree of isotropic lights.
+    /// The emission profiles' bounds of node `index` seen under `cone`
+    /// (from its ball alone): [`Factor::ONE`] for a tree of isotropic
+    /// lights.
     #[inline(always)]
     pub(crate) fn factor(&self, index: usize, cone: &Cone) -> Factor {
         match &self.orientation {
             None => Factor::ONE,
             Some(o) => o.cones[index].factor(cone),
+        }
+    }
+
+    /// [`factor`](Self::factor) from the point `point` (the cone's apex),
+    /// narrowed by the node's box ([`NodeCone::box_cosines`]).
+    #[inline(always)]
+    pub(crate) fn factor_at(&self, index: usize, point: DVec3, cone: &Cone) -> Factor {
+        match &self.orientation {
+            None => Factor::ONE,
+            Some(o) => o.cones[index].factor_boxed(
+                (-cone.axis, cone.sin_half_angle, cone.cos_half_angle),
+                &self.nodes[index].aabb,
+                point,
+                0.0,
+            ),
         }
     }
 
@@ -400,8 +524,8 @@ impl LightTree {
         };
         let node = &self.nodes[index];
         let offset = centre - node.centroid.as_dvec3();
-        let (towards, sin, cos) = seen_within(offset, f64::from(node.radius) + radius);
-        o.cones[index].factor_within(towards, sin, cos)
+        let seen = seen_within(offset, f64::from(node.radius) + radius);
+        o.cones[index].factor_boxed(seen, &node.aabb, centre, radius)
     }
 
     /// The emission bounds of the light at `leaf_index` (leaf order) over
@@ -528,6 +652,99 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// Narrowed by the members' box, the factor still bounds every member's
+    /// profile, from points and from every point of a ball about one: thin
+    /// boxes (one flat along a random axis, as lamps at one height or
+    /// lights on a wall) seen from far and near, members on the box's
+    /// faces, every kind of profile; and it is tighter than the ball's
+    /// alone for a thin node seen off its axis.
+    #[test]
+    fn the_boxed_factor_bounds_every_member_of_thin_nodes() {
+        let mut seed = 11u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) as f32
+        };
+        let mut narrower = 0;
+        for round in 0..400 {
+            let base = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+            // Thin along one axis (all members at one height for round % 3
+            // == 0), or not.
+            let scale = match round % 3 {
+                0 => Vec3::new(4.0, 4.0, 0.0),
+                1 => Vec3::new(4.0, 0.01, 4.0),
+                _ => Vec3::splat(2.0),
+            };
+            let (mut profiles, mut positions) = (Vec::new(), Vec::new());
+            for _ in 0..8 {
+                let axis = base + 0.2 * Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+                let e = match round % 5 {
+                    0 => Emission::cosine(axis, 1.0),
+                    1 => Emission::spot(axis, 0.2 * next(), 0.3 + next()),
+                    2 => Emission::cosine(axis, 300.0 * next()).two_sided(),
+                    3 => Emission::spot(axis, 0.02, 0.05 + 0.2 * next()),
+                    _ => Emission::spot(axis, 0.1, 0.8).two_sided(),
+                };
+                profiles.push(profile(e));
+                positions.push(Vec3::new(next(), next(), next()) * scale);
+            }
+            let aabb = positions.iter().fold(Aabb::EMPTY, |b, &x| b.union_point(x));
+            let centre = 0.5 * (aabb.min + aabb.max);
+            let radius = positions
+                .iter()
+                .map(|x| x.distance(centre))
+                .fold(0.0f32, f32::max)
+                * (1.0 + 1e-6);
+            let cone = NodeCone::of(&profiles);
+            for k in 0..60 {
+                let far = if k % 2 == 0 { 3.0 } else { 40.0 };
+                let p =
+                    (centre + Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * far).as_dvec3();
+                let reach = if k % 3 == 0 {
+                    0.0
+                } else {
+                    0.2 * f64::from(next())
+                };
+                let offset = p - centre.as_dvec3();
+                let seen = seen_within(offset, f64::from(radius) + reach);
+                let f = cone.factor_boxed(seen, &aabb, p, reach);
+                let plain = cone.factor_within(seen.0, seen.1, seen.2);
+                assert!(f.lower >= plain.lower && f.upper <= plain.upper);
+                narrowed_count(&mut narrower, &f, &plain);
+                // Members seen from the point and from points of the ball
+                // about it.
+                for j in 0..4 {
+                    let dir = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5)
+                        .normalize_or_zero()
+                        .as_dvec3();
+                    let q = if j == 0 {
+                        p
+                    } else {
+                        p + dir * reach * f64::from(next())
+                    };
+                    for (pr, x) in profiles.iter().zip(&positions) {
+                        let v = pr.factor(*x, q);
+                        assert!(
+                            f.lower <= v && v <= f.upper,
+                            "{round}/{k}: {v} outside [{}, {}]",
+                            f.lower,
+                            f.upper
+                        );
+                    }
+                }
+            }
+        }
+        assert!(narrower > 1000, "the box narrowed only {narrower} factors");
+    }
+
+    fn narrowed_count(count: &mut u32, boxed: &Factor, plain: &Factor) {
+        if boxed.upper < plain.upper || boxed.lower > plain.lower {
+            *count += 1;
         }
     }
 }
