@@ -664,12 +664,7 @@ mod tests {
     #[test]
     fn the_boxed_factor_bounds_every_member_of_thin_nodes() {
         let mut seed = 11u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) as f32
-        };
+        let mut next = || crate::testing::uniform(&mut seed);
         let mut narrower = 0;
         for round in 0..400 {
             let base = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
