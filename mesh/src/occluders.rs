@@ -539,12 +539,10 @@ impl Occluders {
             .any(|&slot| self.hits(slot as usize, &segment, from, to, t_min))
     }
 
-    /// Whether the shadow ray `segment` (from `from` to `to`, hits counted
-    /// from parameter `t_min`) meets the occluder in `slot`.
-    #[inline]
     /// The position in `slots` of the first occluder that blocks the
     /// segment from `from` to `to` (as [`blocked`](Self::blocked) tests
     /// it), if one does.
+    #[inline]
     pub(crate) fn blocker_in(&self, slots: &[u32], from: Vec3, to: Vec3) -> Option<usize> {
         let (segment, t_min) = self.shadow_ray(from, to)?;
         slots
@@ -552,6 +550,9 @@ impl Occluders {
             .position(|&slot| self.hits(slot as usize, &segment, from, to, t_min))
     }
 
+    /// Whether the shadow ray `segment` (from `from` to `to`, hits counted
+    /// from parameter `t_min`) meets the occluder in `slot`.
+    #[inline]
     pub(crate) fn hits(
         &self,
         slot: usize,
