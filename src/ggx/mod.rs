@@ -246,13 +246,16 @@
 
 use glam::{DVec3, Vec3};
 
+use crate::dispatch::avx2_or;
 use crate::geometry::{Cone, Surface};
 use crate::lambert::Lambert;
-use crate::numeric::{DISTANCE_SLACK, ExactSum, SECOND_ORDER_SLACK, dot_of_difference};
+use crate::lanes::array;
+use crate::numeric::{ExactSum, dot_of_difference};
 use crate::shader::{NodeEstimate, Seal, Shader};
 use crate::tree::Node;
 use crate::{PointLight, ShadeError};
 
+mod bound;
 mod sum;
 
 /// `u = 2^-53`, the unit roundoff of `f64`.
@@ -516,311 +519,6 @@ impl Ggx {
         let t2 = t * t;
         self.f0 + (DVec3::ONE - self.f0) * (t2 * t2 * t)
     }
-
-    /// The intervals of `n.l`, `v.h` and `sin theta_h` over a node's
-    /// points (its ball and box), widened to hold what `eval` computes for
-    /// each member (the module's text), with the bounds on `|l + v|` and
-    /// on the distance that the expansion also reads.
-    #[inline]
-    fn ranges(&self, view: &GgxView, surface: &Surface, node: &Node, cone: &Cone) -> Ranges {
-        let (n, v, b) = (surface.normal, surface.view, view.nv);
-
-        // a = n.l over the node, true values: cone, then box.
-        let (cone_lo, cone_hi) = cone.cos_range(n);
-        let (z_lo, z_hi) = node.aabb.extent_along(surface.point, n, SECOND_ORDER_SLACK);
-        let (box_near, box_far) = node.aabb.distance_range(surface.point);
-        let near = (cone.distance - cone.radius).max(0.0) * (1.0 - DISTANCE_SLACK);
-        let near = near.max(box_near);
-        let far = ((cone.distance + cone.radius) * (1.0 + DISTANCE_SLACK)).min(box_far);
-        let mut a_hi = cone_hi + DIRECTION_SLACK;
-        if near > 0.0 {
-            a_hi = a_hi.min(z_hi.max(0.0) / near * (1.0 + OP_SLACK));
-        }
-        let mut a_lo = cone_lo - DIRECTION_SLACK;
-        if z_lo > 0.0 && far > 0.0 {
-            a_lo = a_lo.max(z_lo / far * (1.0 - OP_SLACK));
-        }
-        let (a_lo, a_hi) = (a_lo.clamp(0.0, 1.0), a_hi.clamp(0.0, 1.0));
-
-        // c = v.h = sqrt((1 + v.l) / 2) >= (a + b) / 2, true values.
-        let (vl_lo, vl_hi) = cone.cos_range(v);
-        // `cos_range`'s lower end is `cos(theta_c + delta)`, which is not
-        // the minimum once `theta_c + delta > pi` (then `sin(theta_c +
-        // delta) < 0`): there the cone reaches `-v` and the minimum is -1.
-        let (cos_c, sin_c) = (v.dot(cone.axis), v.cross(cone.axis).length());
-        let past_pi = sin_c * cone.cos_half_angle + cos_c * cone.sin_half_angle <= DIRECTION_SLACK;
-        let vl_lo = if past_pi { -1.0 } else { vl_lo };
-        let half_root = |x: f64| (0.5 * (1.0 + x)).max(0.0).sqrt();
-        let c_lo = (half_root(vl_lo - DIRECTION_SLACK) * (1.0 - OP_SLACK))
-            .max(0.5 * (a_lo + b) * (1.0 - OP_SLACK));
-        let c_hi = (half_root(vl_hi + DIRECTION_SLACK) * (1.0 + OP_SLACK))
-            .min(1.0)
-            .max(c_lo);
-
-        // s = sin theta_h, true values: the ratio n.h = (a + b) / (2 c).
-        let sine_of = |cos: f64| {
-            let cos = cos.clamp(0.0, 1.0);
-            ((1.0 - cos) * (1.0 + cos)).sqrt()
-        };
-        let nh_lo = (a_lo + b) / (2.0 * c_hi) * (1.0 - OP_SLACK);
-        let mut s_hi = sine_of(nh_lo) * (1.0 + OP_SLACK);
-        let mut s_lo = if c_lo > 0.0 {
-            sine_of((a_hi + b) / (2.0 * c_lo) * (1.0 + OP_SLACK)) * (1.0 - OP_SLACK)
-        } else {
-            0.0
-        };
-        // |l + v| = 2 v.h >= n.(l + v) = a + b.
-        let mut h_min = (2.0 * c_lo).max(a_lo + b);
-
-        // The half-vector cone.
-        let axis_sum = cone.axis + v;
-        let h_len = axis_sum.length();
-        // |l - l_c| <= 2 sin(delta / 2) = sqrt(2 sin^2 delta / (1 + cos delta)).
-        let (sd, cd) = (cone.sin_half_angle, cone.cos_half_angle);
-        let eps = (2.0 * sd * sd / (1.0 + cd)).sqrt() * (1.0 + OP_SLACK) + DIRECTION_SLACK;
-        // |H_c| is within about 20 u of the computed length.
-        let h_c = h_len - DIRECTION_SLACK;
-        if h_c > eps {
-            h_min = h_min.max(h_c - eps);
-            let sin_h = (eps / h_c * (1.0 + OP_SLACK)).min(1.0);
-            let cos_h = ((1.0 - sin_h) * (1.0 + sin_h)).sqrt();
-            let cos_c = n.dot(axis_sum) / h_len;
-            let sin_c = n.cross(axis_sum).length() / h_len;
-            let cone_s_lo = if cos_c >= cos_h {
-                0.0
-            } else if cos_c * cos_h + sin_c * sin_h <= 0.0 {
-                1.0
-            } else {
-                sin_c * cos_h - cos_c * sin_h
-            };
-            let cone_s_hi = if cos_c * cos_h - sin_c * sin_h <= 0.0 {
-                1.0
-            } else {
-                sin_c * cos_h + cos_c * sin_h
-            };
-            s_lo = s_lo.max(cone_s_lo);
-            s_hi = s_hi.min(cone_s_hi);
-        }
-
-        // Widen to the computed quantities of `eval`.
-        let slack = DIRECTION_SLACK * (1.0 + 1.0 / h_min);
-        Ranges {
-            a: (
-                (a_lo * (1.0 - HEIGHT_RELATIVE_SLACK) - DIRECTION_SLACK).max(0.0),
-                (a_hi * (1.0 + HEIGHT_RELATIVE_SLACK) + DIRECTION_SLACK).min(1.0),
-            ),
-            c: (
-                (c_lo - DIRECTION_SLACK).max(0.0),
-                (c_hi + DIRECTION_SLACK).min(1.0),
-            ),
-            s: (
-                (s_lo - slack).clamp(0.0, 1.0),
-                (s_hi + slack).clamp(0.0, 1.0),
-            ),
-            h_min,
-            near,
-        }
-    }
-
-    /// The interval `[f_lo, f_hi]` of the BRDF over a node's lit members
-    /// ((P4) in the module's text), from its [`Ranges`].
-    #[inline]
-    fn brdf_range(&self, view: &GgxView, r: &Ranges) -> (DVec3, DVec3) {
-        let ((a_lo, a_hi), (c_lo, c_hi), (s_lo, s_hi)) = (r.a, r.c, r.s);
-        let f_hi = self.fresnel(c_lo)
-            * (self.distribution(s_lo * s_lo) * self.visibility(view, a_lo))
-            * (1.0 + PRODUCT_SLACK);
-        let f_lo = self.fresnel(c_hi)
-            * (self.distribution(s_hi * s_hi) * self.visibility(view, a_hi))
-            * (1.0 - PRODUCT_SLACK);
-        (f_lo.max(DVec3::ZERO), f_hi)
-    }
-
-    /// (P5)-(P9): the node's interval from the second-order expansion of
-    /// its members' terms about its centroid. `None` where the node's box
-    /// or ball may reach the point, a member may have `n.l` below
-    /// [`EXPANSION_MIN_COS`], or `|l + v|` may come within
-    /// [`EXPANSION_MIN_HALF`] of 0 over it: the product bound alone
-    /// serves those.
-    #[inline]
-    fn expansion(
-        &self,
-        view: &GgxView,
-        surface: &Surface,
-        node: &Node,
-        cone: &Cone,
-        r: &Ranges,
-    ) -> Option<(DVec3, DVec3)> {
-        let near = r.near;
-        let ((a_lo, a_hi), (s_lo, s_hi)) = (r.a, r.s);
-        let h_min = r.h_min;
-        if !(near > 0.0 && h_min > EXPANSION_MIN_HALF && a_lo > EXPANSION_MIN_COS && s_lo <= s_hi) {
-            return None;
-        }
-        let (n, v, b) = (surface.normal, surface.view, view.nv);
-        let (alpha2, k) = (self.alpha2, self.k);
-        let pi = core::f64::consts::PI;
-        let (near2, near3) = (near * near, near * near * near);
-
-        // The distribution over r^2, g = D / r^2: at y0 = c - p, its
-        // gradient, and the bounds (P6) over the node.
-        let y = cone.offset;
-        let d = cone.distance;
-        let l = cone.axis;
-        let m = l + v;
-        let mu = m.length();
-        let h = m / mu;
-        let t = n.dot(h);
-        let q0 = alpha2 + k * n.cross(h).length_squared();
-        let d0 = alpha2 / (pi * q0 * q0);
-        let d_prime = 4.0 * k * t * d0 / q0;
-        let inv_r = 1.0 / d;
-        let inv_r2 = inv_r * inv_r;
-        let g0 = d0 * inv_r2;
-        let tilt = n - h * t;
-        let tilt = tilt - l * l.dot(tilt);
-        let grad_g = tilt * (d_prime / mu * inv_r2 * inv_r) - y * (2.0 * g0 * inv_r2);
-
-        let t_hi = ((1.0 - s_lo) * (1.0 + s_lo)).max(0.0).sqrt();
-        let q = |s: f64| alpha2 + k * (s * s);
-        let q_lo = q(s_lo);
-        let d_hi = alpha2 / (pi * q_lo * q_lo);
-        let d_prime_hi = 4.0 * k * alpha2 * t_hi / (pi * q_lo * q_lo * q_lo);
-        // sup of s^2 / q^4, s^2 / q^3 and s / q^3 over [s_lo, s_hi]: each
-        // rises to its critical point k s^2 = alpha^2 / j and falls after.
-        let at_critical = |j: f64| {
-            if k > 0.0 {
-                (alpha2 / (j * k)).sqrt().max(s_lo).min(s_hi)
-            } else {
-                s_lo
-            }
-        };
-        let (s4, s3, s1) = (at_critical(3.0), at_critical(2.0), at_critical(5.0));
-        let sup_s2_q4 = s4 * s4 / q(s4).powi(4);
-        let sup_s2_q3 = s3 * s3 / q(s3).powi(3);
-        let sup_s_q3 = s1 / q(s1).powi(3);
-        let second_s2 =
-            alpha2 / pi * (24.0 * k * k * t_hi * t_hi * sup_s2_q4 + 4.0 * k * sup_s2_q3);
-        let first_s = 4.0 * k * alpha2 * t_hi / pi * sup_s_q3;
-        let g_sup = d_hi / near2;
-        let g1_sup = (first_s / h_min + 2.0 * d_hi) / near3;
-        let g2_sup = ((second_s2 + d_prime_hi * t_hi + first_s) / (h_min * h_min)
-            + (4.0 + UNIT_SECOND) * first_s / h_min
-            + 6.0 * d_hi)
-            / (near2 * near2);
-
-        let radius = cone.radius;
-        let delta = node.moment_error();
-        // The second moments' traces, and the first moments' terms with
-        // their rounding, per channel.
-        let trace = |c: usize| {
-            let s = &node.channel_covariances[c];
-            let trace = (f64::from(s[0]) + f64::from(s[1]) + f64::from(s[2]))
-                * (1.0 + 2.0 * F32_ENTRY)
-                + 3.0 * delta * radius * radius;
-            trace.min(radius * radius).max(0.0)
-        };
-        let first_moment = |c: usize, grad: DVec3, grad_round: f64| {
-            let o = node.channel_offsets[c].as_dvec3();
-            let rounding: f64 = (0..3)
-                .map(|i| {
-                    (grad[i].abs() + grad_round) * (delta * radius + F32_ENTRY * o[i].abs())
-                        + grad_round * o[i].abs()
-                })
-                .sum();
-            (grad.dot(o), rounding)
-        };
-
-        // The rest, K = phi(a) F(c) with phi(a) = a Vis(a): at the
-        // centroid, its gradient, and the bounds (P7) over the node.
-        let m_of = |a: f64| (alpha2 + k * a * a).sqrt();
-        let u_of = |a: f64| b * m_of(a) + a * view.m_v;
-        let phi = |a: f64| 0.5 * a / u_of(a);
-        let phi_prime = |a: f64| {
-            let u = u_of(a);
-            0.5 * b * alpha2 / (m_of(a) * u * u)
-        };
-        let a0 = n.dot(l);
-        let c0 = 0.5 * mu;
-        let f0 = self.f0;
-        let one_minus = |c: f64| (1.0 - c).max(0.0);
-        let c_lo = r.c.0;
-        let (w0, w_lo) = (one_minus(c0), one_minus(c_lo));
-        let fresnel_prime = |w: f64| (DVec3::ONE - f0) * (5.0 * (w * w) * (w * w));
-        let k0 = self.fresnel(c0) * phi(a0);
-        let grad_a = (n - l * a0) * inv_r;
-        let grad_c = (h - l * l.dot(h)) * (0.5 * inv_r);
-        let (phi0, phi1_0) = (phi(a0), phi_prime(a0));
-        let f_at0 = self.fresnel(c0);
-        let f1_at0 = fresnel_prime(w0);
-
-        let phi_hi = phi(a_hi);
-        let phi1 = phi_prime(a_lo);
-        let phi2 = {
-            let (m_hi, m_lo) = (m_of(a_hi), m_of(a_lo));
-            let (u_hi, u_lo) = (u_of(a_hi), u_of(a_lo));
-            let numerator =
-                (k * a_hi / m_hi) * u_hi + 2.0 * m_hi * (b * k * a_hi / m_hi + view.m_v);
-            b * alpha2 * numerator / (2.0 * m_lo * m_lo * u_lo * u_lo * u_lo)
-        };
-        let f_hi = self.fresnel(c_lo);
-        let f1 = fresnel_prime(w_lo);
-        let f2 = (DVec3::ONE - f0) * (20.0 * w_lo * w_lo * w_lo);
-        let k_sup = f_hi * phi_hi;
-        let k1_sup = (f_hi * phi1 + f1 * (0.5 * phi_hi)) / near;
-        let k2_sup = (f_hi * (phi2 + UNIT_SECOND * phi1)
-            + f1 * phi1
-            + f2 * (0.25 * phi_hi)
-            + f1 * (0.5 * phi_hi * (UNIT_SECOND + 1.0 / h_min)))
-            / near2;
-
-        // (P7): the product's second derivative; the rounding (P9).
-        let hessian =
-            (k_sup * g2_sup + k1_sup * (2.0 * g1_sup) + k2_sup * g_sup) * (1.0 + OP_SLACK);
-        let epsilon = 2.0 / self.alpha * DIRECTION_SLACK * (1.0 + 1.0 / h_min)
-            + PRODUCT_SLACK
-            + 64.0 * DIRECTION_SLACK * (1.0 / a_lo + 1.0 / h_min)
-            + ARITHMETIC;
-        let delta_k = f_hi * (phi1 * (HEIGHT_RELATIVE_SLACK * a_hi + DIRECTION_SLACK))
-            + f1 * (phi_hi * DIRECTION_SLACK);
-        let value_round = (k_sup * epsilon + delta_k) * g_sup;
-        let grad_round = (k_sup * g1_sup + k1_sup * g_sup) * epsilon
-            + delta_k * g1_sup
-            + k2_sup * (g_sup * near * 8.0 * DIRECTION_SLACK);
-
-        let (mut lower, mut upper) = (DVec3::ZERO, DVec3::ZERO);
-        for c in 0..3 {
-            let intensity = node.intensity[c];
-            if intensity == 0.0 {
-                continue;
-            }
-            let value = g0 * k0[c];
-            let grad_k = grad_a * (phi1_0 * f_at0[c]) - grad_c * (phi0 * f1_at0[c]);
-            let grad = grad_g * k0[c] + grad_k * g0;
-            let (first, moments) = first_moment(c, grad, grad_round[c]);
-            let error = 0.5 * hessian[c] * trace(c)
-                + moments
-                + value_round[c]
-                + ARITHMETIC * (value + first.abs());
-            let centre = value + first;
-            lower[c] = intensity * (centre - error).max(0.0);
-            upper[c] = intensity * (centre + error);
-        }
-        Some((lower, upper))
-    }
-}
-
-/// What [`Ggx`]'s bounds know of a node at a point: the intervals of `n.l`
-/// (`a`), `v.h` (`c`) and `sin theta_h` (`s`) over its lit members, each
-/// widened to hold what `eval` computes; a lower bound on `|l + v|` over
-/// the node, and on its distance from the point (0 if it may reach it).
-#[derive(Clone, Copy, Debug)]
-struct Ranges {
-    a: (f64, f64),
-    c: (f64, f64),
-    s: (f64, f64),
-    h_min: f64,
-    near: f64,
 }
 
 /// [`Ggx`]'s per-point data ([`Shader::PerPoint`]): whether the view is
@@ -937,7 +635,12 @@ impl Shader for Ggx {
             return NodeEstimate::ZERO;
         }
         let q = self.unit.bound(&(), surface, node, cone);
-        self.product(view, surface, node, cone, &q)
+        if q.upper.max_element() <= 0.0 {
+            return NodeEstimate::ZERO;
+        }
+        let [estimate] =
+            self.product_lanes(view, surface, &bound::Nodes::new([node], [cone]), &[q]);
+        estimate
     }
 
     /// Lambert's interval for eight nodes side by side, each then as in
@@ -958,39 +661,94 @@ impl Shader for Ggx {
         }
         self.unit
             .bound_nodes(&(), surface, &nodes[..n], &cones[..n], &mut out[..n]);
-        for ((node, cone), out) in nodes.iter().zip(cones).zip(out.iter_mut()) {
-            *out = self.product(view, surface, node, cone, out);
+        let chunks = nodes[..n].chunks(8).zip(cones[..n].chunks(8));
+        for ((nodes, cones), out) in chunks.zip(out[..n].chunks_mut(8)) {
+            self.product_group(view, surface, nodes, cones, out);
         }
     }
 }
 
 impl Ggx {
-    /// (P4): `[f_lo Q_lo, f_hi Q_hi]` from Lambert's interval `q`,
-    /// intersected with the expansion's interval ((P5)-(P9)) where it
-    /// holds, for nodes of more than one light.
-    #[inline(always)]
-    fn product(
+    /// Up to eight nodes side by side (the module `bound`): on `x86_64`
+    /// processors with AVX2, in a copy compiled for AVX2 (the same bits,
+    /// see [`dispatch`](crate::dispatch)), given Lambert's intervals `q`.
+    /// Out of line, compiled once.
+    #[inline(never)]
+    fn product_group(
         &self,
         view: &GgxView,
         surface: &Surface,
-        node: &Node,
-        cone: &Cone,
-        q: &NodeEstimate,
-    ) -> NodeEstimate {
-        if q.upper.max_element() <= 0.0 {
-            return NodeEstimate::ZERO;
+        nodes: &[&Node],
+        cones: &[Cone],
+        out: &mut [NodeEstimate],
+    ) {
+        avx2_or!(
+            Self::product_group_avx2,
+            Self::product_group_inlined,
+            self,
+            view,
+            surface,
+            nodes,
+            cones,
+            out
+        );
+    }
+
+    /// [`product_group`](Self::product_group) compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn product_group_avx2(
+        &self,
+        view: &GgxView,
+        surface: &Surface,
+        nodes: &[&Node],
+        cones: &[Cone],
+        out: &mut [NodeEstimate],
+    ) {
+        self.product_group_inlined(view, surface, nodes, cones, out);
+    }
+
+    /// Four lanes (one AVX2 vector) for up to four nodes, eight for more.
+    #[inline(always)]
+    fn product_group_inlined(
+        &self,
+        view: &GgxView,
+        surface: &Surface,
+        nodes: &[&Node],
+        cones: &[Cone],
+        out: &mut [NodeEstimate],
+    ) {
+        if nodes.len() <= 4 {
+            self.product_padded::<4>(view, surface, nodes, cones, out);
+        } else {
+            self.product_padded::<8>(view, surface, nodes, cones, out);
         }
-        let r = self.ranges(view, surface, node, cone);
-        let (f_lo, f_hi) = self.brdf_range(view, &r);
-        let mut lower = q.lower.max(DVec3::ZERO) * f_lo;
-        let mut upper = q.upper * f_hi;
-        if node.light_count() > 1
-            && let Some((lo, hi)) = self.expansion(view, surface, node, cone, &r)
-        {
-            lower = lower.max(lo);
-            upper = upper.min(hi).max(lower);
+    }
+
+    /// `N` lanes for at most `N` nodes, given Lambert's intervals in
+    /// `out`; unused lanes repeat the last node and their results are
+    /// dropped.
+    #[inline(always)]
+    fn product_padded<const N: usize>(
+        &self,
+        view: &GgxView,
+        surface: &Surface,
+        nodes: &[&Node],
+        cones: &[Cone],
+        out: &mut [NodeEstimate],
+    ) {
+        let n = nodes.len().min(cones.len()).min(out.len()).min(N);
+        if n == 0 {
+            return;
         }
-        NodeEstimate::new(0.5 * (lower + upper), lower, upper)
+        let last = n - 1;
+        let group = bound::Nodes::<N>::new(
+            array(nodes[0], |i| nodes[i.min(last)]),
+            array(&cones[0], |i| &cones[i.min(last)]),
+        );
+        let q: [NodeEstimate; N] = array(NodeEstimate::ZERO, |i| out[i.min(last)]);
+        let result = self.product_lanes(view, surface, &group, &q);
+        out[..n].copy_from_slice(&result[..n]);
     }
 }
 
@@ -1041,10 +799,16 @@ mod tests {
                     if node.light_count() < 2 {
                         continue;
                     }
-                    let r = ggx.ranges(&view, &surface, node, &cone);
-                    let Some((lo, hi)) = ggx.expansion(&view, &surface, node, &cone, &r) else {
+                    let group = bound::Nodes::new([node], [&cone]);
+                    let r = ggx.ranges(&view, &surface, &group);
+                    let (holds, lo, hi) = ggx.expansion(&view, &surface, &group, &r);
+                    if !holds[0] {
                         continue;
+                    }
+                    let at = |v: &[crate::lanes::Lanes<1>; 3]| {
+                        DVec3::new(v[0].0[0], v[1].0[0], v[2].0[0])
                     };
+                    let (lo, hi) = (at(&lo), at(&hi));
                     taken += 1;
                     let exact: DVec3 = tree.lights()[node.lights()]
                         .iter()
@@ -1065,11 +829,68 @@ mod tests {
                     );
                     let q = ggx.unit.bound(&(), &surface, node, &cone);
                     let (f_lo, f_hi) = ggx.brdf_range(&view, &r);
+                    let (f_lo, f_hi) = (at(&f_lo), at(&f_hi));
                     let product = (q.upper * f_hi - q.lower.max(DVec3::ZERO) * f_lo).max_element();
                     narrower += usize::from(10.0 * (hi - lo).max_element() < product);
                 }
             }
         }
         assert!(taken > 100_000 && narrower > 20_000, "{taken} {narrower}");
+    }
+
+    /// Each node's bound is the same bits alone, beside up to seven others
+    /// (four and eight lanes), and in the baseline copy of the lanes.
+    #[test]
+    fn a_node_bound_is_the_same_alone_and_in_lanes() {
+        let mut seed = 9u64;
+        let mut next = move || uniform(&mut seed);
+        let lights: Vec<_> = (0..3000)
+            .map(|_| {
+                let at = Vec3::new(30.0 * next(), 30.0 * next(), 6.0 * next() - 1.0);
+                PointLight::new(at, Vec3::new(next(), next(), next()))
+            })
+            .collect();
+        let tree = LightTree::builder()
+            .max_leaf_lights(4)
+            .build(&lights)
+            .unwrap();
+        let mut compared = 0;
+        for &alpha in &[1e-3f32, 0.05, 0.3, 1.0] {
+            let ggx = Ggx::new(Vec3::new(0.04, 0.5, 0.9), alpha);
+            for _ in 0..8 {
+                let p = Vec3::new(30.0 * next(), 30.0 * next(), 0.0);
+                let v = Vec3::new(next() - 0.5, next() - 0.5, 0.2 + next());
+                let surface = Surface::new(p, Vec3::Z, Some(v)).unwrap();
+                let view = ggx.prepare(&surface);
+                let nodes: Vec<_> = tree
+                    .nodes()
+                    .iter()
+                    .filter_map(|node| Some((node, node.cone(surface.point)?)))
+                    .collect();
+                for len in [2, 3, 4, 5, 8] {
+                    for group in nodes.chunks(len) {
+                        let refs: Vec<_> = group.iter().map(|(node, _)| *node).collect();
+                        let cones: Vec<_> = group.iter().map(|(_, cone)| *cone).collect();
+                        let mut lanes = vec![NodeEstimate::ZERO; group.len()];
+                        let mut baseline = lanes.clone();
+                        ggx.bound_nodes(&view, &surface, &refs, &cones, &mut lanes);
+                        crate::dispatch::baseline(|| {
+                            ggx.bound_nodes(&view, &surface, &refs, &cones, &mut baseline);
+                        });
+                        for (((node, cone), a), b) in group.iter().zip(&lanes).zip(&baseline) {
+                            let alone = ggx.bound(&view, &surface, node, cone);
+                            let bits = |e: &NodeEstimate| {
+                                [e.estimate, e.lower, e.upper]
+                                    .map(|v| v.to_array().map(f64::to_bits))
+                            };
+                            assert_eq!(bits(&alone), bits(a));
+                            assert_eq!(bits(&alone), bits(b));
+                            compared += usize::from(alone.upper != DVec3::ZERO);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(compared > 10_000, "{compared}");
     }
 }
