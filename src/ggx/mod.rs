@@ -643,8 +643,9 @@ impl Shader for Ggx {
         estimate
     }
 
-    /// Lambert's interval for eight nodes side by side, each then as in
-    /// [`bound`](Shader::bound): exactly what it gives.
+    /// Lambert's intervals and the rest of the bound, for up to eight
+    /// nodes side by side (four lanes for up to four): exactly what
+    /// [`bound`](Shader::bound) gives for each.
     #[inline]
     fn bound_nodes(
         &self,
@@ -669,10 +670,10 @@ impl Shader for Ggx {
 }
 
 impl Ggx {
-    /// Up to eight nodes side by side (the module `bound`): on `x86_64`
-    /// processors with AVX2, in a copy compiled for AVX2 (the same bits,
-    /// see [`dispatch`](crate::dispatch)), given Lambert's intervals `q`.
-    /// Out of line, compiled once.
+    /// The bound of up to eight nodes side by side (the module `bound`),
+    /// given Lambert's intervals in `out`: on `x86_64` processors with
+    /// AVX2, in a copy compiled for AVX2 (the same bits, see
+    /// [`dispatch`](crate::dispatch)). Out of line, compiled once.
     #[inline(never)]
     fn product_group(
         &self,
