@@ -103,6 +103,20 @@ impl<const N: usize> Vec3Lanes<N> {
         self.x * b[0] + self.y * b[1] + self.z * b[2]
     }
 
+    /// `a . self` per lane in plain `f64`, `(a_x x + a_y y) + a_z z`, and
+    /// the magnitude `|a_x x| + |a_y y| + |a_z z|` its rounding is measured
+    /// against (as `plain_dot_of_difference` gives them for `self = x -
+    /// p`).
+    #[inline(always)]
+    pub(crate) fn plain_dot(self, a: [f64; 3]) -> (Lanes<N>, Lanes<N>) {
+        let terms = Self {
+            x: a[0] * self.x,
+            y: a[1] * self.y,
+            z: a[2] * self.z,
+        };
+        (terms.element_sum(), terms.abs().element_sum())
+    }
+
     /// `x + y + z`, as `DVec3::element_sum`.
     #[inline(always)]
     pub(crate) fn element_sum(self) -> Lanes<N> {

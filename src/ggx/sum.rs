@@ -111,17 +111,11 @@ impl Ggx {
         let mut near = DVec3::ZERO;
         for chunk in lights.chunks(L) {
             // A short last chunk repeats its last light in the unused
-            // lanes, which add nothing (`used`).
+            // lanes, whose weights are 0 (`keep` below).
             let last = chunk.len() - 1;
             let light = |i: usize| &chunk[i.min(last)];
             let o = Vec3Lanes::<L>::from_fn(|i| light(i).position.as_dvec3().to_array()).minus(p);
-            let terms = Vec3Lanes {
-                x: normal.x * o.x,
-                y: normal.y * o.y,
-                z: normal.z * o.z,
-            };
-            let height = terms.element_sum();
-            let magnitude = terms.abs().element_sum();
+            let (height, magnitude) = o.plain_dot(normal.to_array());
             let d2 = o.dot(o);
             let inv_d = one / d2.sqrt();
             let a = (height * inv_d * inv_normal).max(zero).min(one);

@@ -51,13 +51,7 @@ impl Lambert {
                 Vec3Lanes::<L>::from_fn(|i| chunk[i.min(last)].position.as_dvec3().to_array());
             let d = position.minus(p.to_array());
             // Plain f64 heights, accepted per lane as dot_of_difference does.
-            let terms = Vec3Lanes {
-                x: normal.x * d.x,
-                y: normal.y * d.y,
-                z: normal.z * d.z,
-            };
-            let height = terms.element_sum();
-            let magnitude = terms.abs().element_sum();
+            let (height, magnitude) = d.plain_dot(normal.to_array());
             let d2 = d.dot(d);
             let ratio = height / (d2 * (n2 * d2).sqrt());
             for (i, (light, out)) in chunk.iter().zip(out).enumerate() {
